@@ -1,0 +1,1 @@
+"""Motion data: BVH I/O, rotations, skeletons, kinematics, datasets and the built-in synthetic data."""

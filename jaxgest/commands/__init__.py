@@ -1,0 +1,1 @@
+"""CLI command groups that are not tied to one model."""

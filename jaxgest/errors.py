@@ -1,0 +1,28 @@
+"""User-facing errors.
+
+Every error a user can cause with plausible input derives from :class:`JaxgestError`. The CLI catches
+it, prints ``jaxgest: <message>`` as one line on stderr and exits with status 2 -- never a traceback.
+Messages name the file (when there is one) and the problem.
+"""
+
+from __future__ import annotations
+
+
+class JaxgestError(Exception):
+    """Base class of every user-facing error (bad input, bad checkpoint, bad argument)."""
+
+
+class DataError(JaxgestError):
+    """A data file or folder is unusable (unknown layout, too short, NaN, wrong rate, ...)."""
+
+
+class AudioError(DataError):
+    """An audio file is unreadable, empty or contains NaN/inf samples."""
+
+
+class CheckpointError(JaxgestError):
+    """A workdir has no checkpoint, or its config/skeleton differs from what is asked for."""
+
+
+class TrainingError(JaxgestError):
+    """Training cannot continue (for example a non-finite loss)."""

@@ -1,0 +1,105 @@
+"""Shared training machinery: checkpoint save/restore/resume, config check, metrics.jsonl, NaN stop."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+
+from jaxgest.errors import CheckpointError, TrainingError
+from jaxgest.training import Checkpointer, MetricsLogger, TrainState, config_diff, train_loop
+
+
+def _toy(lr=0.1):
+    params = {"w": jnp.zeros((3,), jnp.float32), "b": jnp.zeros((), jnp.float32)}
+    tx = optax.adam(lr)
+    state = TrainState.create(apply_fn=None, params=params, tx=tx)
+    target = jnp.asarray([1.0, -2.0, 0.5], jnp.float32)
+
+    @jax.jit
+    def step(state, batch, key):
+        def loss_fn(p):
+            pred = batch["x"] @ p["w"] + p["b"]
+            return jnp.mean((pred - batch["x"] @ target) ** 2) * batch["scale"]
+
+        loss, grads = jax.value_and_grad(loss_fn)(state.params)
+        return state.apply_gradients(grads=grads), {"loss": loss}
+
+    def batch_fn(i):
+        rng = np.random.default_rng(i)
+        return {"x": jnp.asarray(rng.normal(size=(8, 3)), jnp.float32), "scale": jnp.float32(1.0)}
+
+    return state, step, batch_fn
+
+
+def test_loss_decreases_and_metrics_written(tmp_path, key):
+    state, step, batch_fn = _toy()
+    log = MetricsLogger(tmp_path)
+    state = train_loop(state, step, batch_fn, key=key, num_steps=40, logger=log, log_every=10, progress=False)
+    lines = [json.loads(x) for x in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in lines] == [10, 20, 30, 40]
+    assert lines[-1]["loss"] < lines[0]["loss"]
+
+
+def test_resume_equals_uninterrupted(tmp_path, key):
+    cfg = {"lr": 0.1, "steps": 30}
+    s0, step, batch_fn = _toy()
+    full = train_loop(s0, step, batch_fn, key=key, num_steps=30, progress=False)
+
+    ck = Checkpointer(tmp_path, kind="toy", config=cfg)
+    s1, _, _ = _toy()
+    train_loop(s1, step, batch_fn, key=key, num_steps=20, checkpointer=ck, ckpt_every=10, progress=False)
+    ck.close()
+    # "Killed" after step 20; a new process restores and continues.
+    ck2 = Checkpointer(tmp_path, kind="toy", config={**cfg, "steps": 30})
+    assert ck2.latest_step() == 20
+    s2, _, _ = _toy()
+    s2 = ck2.restore(s2)
+    assert int(s2.step) == 20
+    resumed = train_loop(s2, step, batch_fn, key=key, num_steps=30, checkpointer=ck2, progress=False)
+    ck2.close()
+    np.testing.assert_array_equal(np.asarray(resumed.params["w"]), np.asarray(full.params["w"]))
+
+
+def test_restore_with_other_config_names_the_difference(tmp_path, key):
+    s, step, batch_fn = _toy()
+    ck = Checkpointer(tmp_path, kind="toy", config={"lr": 0.1, "width": 3})
+    ck.save(s)
+    ck.close()
+    other = Checkpointer(tmp_path, kind="toy", config={"lr": 0.1, "width": 4})
+    with pytest.raises(CheckpointError, match=r"width: 3 -> 4"):
+        other.restore(s)
+    wrong_kind = Checkpointer(tmp_path, kind="other", config={"lr": 0.1, "width": 3})
+    with pytest.raises(CheckpointError, match="model kind"):
+        wrong_kind.restore(s)
+
+
+def test_missing_checkpoint_is_a_clear_error(tmp_path):
+    with pytest.raises(CheckpointError, match="no checkpoint"):
+        Checkpointer(tmp_path / "nothing", kind="toy", config={}, read_only=True)
+
+
+def test_non_finite_loss_stops_and_keeps_last_good(tmp_path, key):
+    s, step, batch_fn = _toy()
+    ck = Checkpointer(tmp_path, kind="toy", config={})
+
+    def bad_batch(i):
+        b = batch_fn(i)
+        return {**b, "scale": jnp.float32(np.nan if i >= 12 else 1.0)}
+
+    with pytest.raises(TrainingError, match="non-finite loss at step"):
+        train_loop(s, step, bad_batch, key=key, num_steps=30, checkpointer=ck, ckpt_every=5, log_every=5,
+                   progress=False)
+    assert ck.latest_step() == 10
+    restored = ck.restore(_toy()[0])
+    assert np.all(np.isfinite(np.asarray(restored.params["w"])))
+    ck.close()
+
+
+def test_config_diff_nested():
+    assert config_diff({"a": 1, "m": {"x": 1}}, {"a": 1, "m": {"x": 2}}) == ["m.x: 1 -> 2"]
+    assert config_diff({"a": 1}, {"a": 1}) == []

@@ -279,8 +279,8 @@ def quat_to_euler(q, order: str):
     lock = xp.abs(sb) > 1.0 - 1e-9
     a = xp.arctan2(-s * m[..., j, k], m[..., k, k])
     c = xp.arctan2(-s * m[..., i, j], m[..., i, i])
-    # Gimbal lock: R = R_i(a +/- c) R_j(+/-90); put it all in a. The (j, i)/(j, j) block gives it.
-    a_lock = xp.arctan2(s * m[..., j, i], m[..., j, j])
+    # Gimbal lock: R = R_i(a') R_j(b) with c = 0; then R e_j = R_i(a') e_j gives a' from column j.
+    a_lock = xp.arctan2(s * m[..., k, j], m[..., j, j])
     a = xp.where(lock, a_lock, a)
     c = xp.where(lock, 0.0, c)
     return xp.stack([a, b, c], axis=-1) * (180.0 / np.pi)

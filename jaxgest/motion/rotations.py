@@ -137,7 +137,7 @@ def quat_to_expmap(q):
     s2 = xp.sum(u * u, axis=-1, keepdims=True)
     small = s2 < 1e-10
     s_safe = xp.sqrt(xp.where(small, 1.0, s2))
-    w_safe = xp.where(small, 1.0, w)
+    w_safe = xp.where(small, w, 1.0)  # w ~ 1 where small; 1 elsewhere keeps the unused branch finite
     # angle / sin(angle/2), angle = 2 atan2(s, w); Taylor: 2/w (1 - s^2 / (3 w^2)) near s = 0.
     factor = xp.where(small, 2.0 / w_safe * (1.0 - s2 / (3.0 * w_safe * w_safe)), 2.0 * xp.arctan2(s_safe, w) / s_safe)
     return u * factor
@@ -274,9 +274,10 @@ def quat_to_euler(q, order: str):
     m = quat_to_matrix(q)
     i, j, k = (_AXES[c] for c in order)
     s = 1.0 if (j - i) % 3 == 1 else -1.0
-    sb = xp.clip(s * m[..., i, k], -1.0, 1.0)
-    b = xp.arcsin(sb)
-    lock = xp.abs(sb) > 1.0 - 1e-9
+    sb = s * m[..., i, k]
+    cb = xp.sqrt(m[..., i, i] ** 2 + m[..., i, j] ** 2)  # atan2 keeps full precision near +/-90 degrees
+    b = xp.arctan2(sb, cb)
+    lock = cb < 1e-9
     a = xp.arctan2(-s * m[..., j, k], m[..., k, k])
     c = xp.arctan2(-s * m[..., i, j], m[..., i, i])
     # Gimbal lock: R = R_i(a') R_j(b) with c = 0; then R e_j = R_i(a') e_j gives a' from column j.

@@ -41,7 +41,7 @@ def test_euler_round_trip_against_scipy(q, order):
     eul = R.quat_to_euler(q, order)
     ref = Rotation.from_euler(order, eul, degrees=True)  # uppercase = intrinsic, as BVH
     same_rotation(R.euler_to_quat(eul, order), from_scipy(ref), 1e-9)
-    same_rotation(R.euler_to_quat(eul, order), q, 1e-9)
+    same_rotation(R.euler_to_quat(eul, order), q, 2e-7)  # ~1e-7 only within 1e-7 of gimbal lock
 
 
 @SETTINGS

@@ -1,0 +1,153 @@
+"""Configuration of tokenized gesture style transfer (Kuriyama et al. 2022): autoencoder, transformer, training.
+
+Presets (``get_config(name)``):
+
+* ``"paper"`` -- the published sizes (App. A, §3.3-3.5): autoencoder 23,743 parameters, transformer 50,240
+  (one LayerNorm per block shared by both residuals, as in the authors' code; ``layernorms_per_block=2``
+  gives 50,496). AE: Adam 1e-4, batch 32, 256-frame windows; transformer: Adam 1e-4, batch 8, 1280-frame
+  windows. Default ``variant="paper"``: pre-LN ("layer normalization as a preprocessing step", §3.4),
+  band mask |i - j| <= omega, sinusoidal positions over the token index.
+  Command: ``jaxgest tgst train --data DIR --workdir W --preset paper``; the paper trains 1000 epochs
+  (hours on a CPU); expect an AE mean angular error of a few degrees on Bandai-Namco.
+* ``"tiny"`` -- the same (already tiny) widths, but short windows and small batches (AE window 64, batch 4;
+  transformer window 128, batch 4) and Adam 1e-3 so tests and ``jaxgest demo --quick`` train in seconds
+  to a minute on a CPU. Not the paper's training setup.
+
+Every config is a frozen (hashable, usable as a jit static argument) dataclass of JSON-friendly fields:
+``dataclasses.asdict(cfg)`` is stored with checkpoints and :func:`config_from_dict` rebuilds it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Mapping
+
+VARIANTS = ("paper", "authors")
+ATTENTION_IMPLS = ("blockwise", "dense")
+
+
+@dataclasses.dataclass(frozen=True)
+class AutoencoderConfig:
+    """Conv1d autoencoder over time (Kuriyama et al. 2022, App. A). Layout (batch, frames, channels)."""
+
+    upper_channels: int = 39  # input/output exp-map channels of the 13 upper-body joints
+    lower_channels: int = 24  # output exp-map channels of the 8 lower-body joints
+    encoder_channels: tuple[int, ...] = (64, 32, 16)  # conv widths; the last one is the latent size d_z
+    encoder_kernels: tuple[int, ...] = (1, 3, 3)  # kernel widths of the encoder convs
+    encoder_strides: tuple[int, ...] = (1, 2, 2)  # strides (PyTorch padding = kernel // 2)
+    upper_decoder_channels: tuple[int, ...] = (32, 64)  # hidden widths of the upper decoder (-> 39)
+    lower_decoder_channels: tuple[int, ...] = (16, 32)  # hidden widths of the lower decoder (-> 24)
+    decoder_kernels: tuple[int, ...] = (3, 3, 1)  # kernel widths of the three decoder convs
+    decoder_upsample: tuple[int, ...] = (2, 2, 1)  # linear x2 upsampling before each decoder conv (1 = none)
+
+    @property
+    def latent_dim(self) -> int:
+        return self.encoder_channels[-1]
+
+    @property
+    def time_reduction(self) -> int:
+        """Frames per latent frame (4 for the paper)."""
+        r = 1
+        for s in self.encoder_strides:
+            r *= s
+        return r
+
+
+@dataclasses.dataclass(frozen=True)
+class TransformerConfig:
+    """Style transformer (Kuriyama et al. 2022, §3.4): one encoder block, one decoder block, single head."""
+
+    token_dim: int = 64  # d_g = w * d_z
+    omega: int = 20  # band half-width of the encoder self-attention mask (in tokens)
+    variant: str = "paper"  # "paper" (text: pre-LN, |i-j| <= omega) or "authors" (public code, see module doc)
+    layernorms_per_block: int = 1  # 1 = one LN shared by both residuals (50,240 params); 2 = two (50,496)
+    attention_impl: str = "blockwise"  # "blockwise" O(N * omega) banded attention, or "dense" masked reference
+    block_size: int = 32  # query block length of the blockwise attention; must be >= omega
+    max_authors_pe: int = 150  # authors' variant: length of the positional table (indexed by batch, a bug)
+
+
+@dataclasses.dataclass(frozen=True)
+class TGSTConfig:
+    """Everything the TGST model and its two trainings need."""
+
+    name: str = "paper"  # preset name, informational
+    autoencoder: AutoencoderConfig = AutoencoderConfig()  # motion <-> latent autoencoder
+    transformer: TransformerConfig = TransformerConfig()  # token encoder/decoder
+    token_width: int = 4  # w: latent frames per gesture token (eq. 1)
+    token_stride: int = 2  # h = w / 2: stride between tokens (half overlap, eq. 1)
+    min_frames: int = 16  # shortest clip accepted (one token = w * 4 = 16 frames)
+    frame_multiple: int = 16  # clips are padded at the end to a multiple of this many frames
+    lambda_identity: float = 1.0  # weight of L_identity (eq. 12 fixes it to 1; settable for ablations)
+    lambda_cyclic: float = 1.0  # lambda_c of eq. 12
+    lambda_structure: float = 1.0  # lambda_s of eq. 12
+    lambda_appearance: float = 1.0  # lambda_a of eq. 12
+    use_identity: bool = True  # switch L_identity on/off (ablation, Table 4)
+    use_cyclic: bool = True  # switch L_cyclic on/off
+    use_structure: bool = True  # switch L_structure on/off
+    use_appearance: bool = True  # switch L_appearance on/off
+    ae_learning_rate: float = 1e-4  # Adam learning rate of the autoencoder (§3.5)
+    ae_batch_size: int = 32  # autoencoder batch size (§3.5)
+    ae_window: int = 256  # autoencoder training window in frames (§3.5)
+    transformer_learning_rate: float = 1e-4  # Adam learning rate of the transformer (§3.5)
+    transformer_batch_size: int = 8  # content/style pairs per transformer batch (§3.5)
+    transformer_window: int = 1280  # frames per content/style training clip (§3.5)
+    swap_temperature: float = 1.0  # softmax temperature of the soft swap (1 = eq. 4)
+
+    def __post_init__(self):
+        t = self.transformer
+        if t.variant not in VARIANTS:
+            raise ValueError(f"transformer.variant must be one of {VARIANTS}, got {t.variant!r}")
+        if t.attention_impl not in ATTENTION_IMPLS:
+            raise ValueError(f"transformer.attention_impl must be one of {ATTENTION_IMPLS}, got {t.attention_impl!r}")
+        if t.layernorms_per_block not in (1, 2):
+            raise ValueError(f"transformer.layernorms_per_block must be 1 or 2, got {t.layernorms_per_block}")
+        if t.block_size < max(t.omega, 1):
+            raise ValueError(f"transformer.block_size ({t.block_size}) must be >= omega ({t.omega})")
+        if self.token_width != 2 * self.token_stride:
+            raise ValueError("token_width must be twice token_stride (half-overlapping tokens, eq. 1)")
+        if t.token_dim != self.token_width * self.autoencoder.latent_dim:
+            raise ValueError(f"transformer.token_dim must be token_width * latent_dim = "
+                             f"{self.token_width * self.autoencoder.latent_dim}, got {t.token_dim}")
+        if self.frame_multiple % (self.autoencoder.time_reduction * self.token_stride):
+            raise ValueError("frame_multiple must be a multiple of time_reduction * token_stride")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def config_from_dict(d: Mapping[str, Any]) -> TGSTConfig:
+    """Inverse of ``dataclasses.asdict`` (JSON lists become tuples again)."""
+
+    def build(cls, m):
+        kwargs = {}
+        for f in dataclasses.fields(cls):
+            if f.name not in m:
+                continue
+            v = m[f.name]
+            if f.name == "autoencoder":
+                v = build(AutoencoderConfig, v)
+            elif f.name == "transformer":
+                v = build(TransformerConfig, v)
+            elif isinstance(v, list):
+                v = tuple(v)
+            kwargs[f.name] = v
+        return cls(**kwargs)
+
+    return build(TGSTConfig, d)
+
+
+def get_config(name: str = "paper") -> TGSTConfig:
+    """Named preset: ``"paper"`` (published sizes and training setup) or ``"tiny"`` (fast tests/demo)."""
+    if name == "paper":
+        return TGSTConfig(name="paper")
+    if name == "tiny":
+        return TGSTConfig(
+            name="tiny",
+            ae_learning_rate=1e-3,
+            ae_batch_size=4,
+            ae_window=64,
+            transformer_learning_rate=1e-3,
+            transformer_batch_size=4,
+            transformer_window=128,
+        )
+    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper' or 'tiny')")

@@ -1,0 +1,72 @@
+"""Writing the built-in synthetic dataset to disk (BVH + 16 kHz WAV + manifest.csv)."""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import os
+import pathlib
+import tempfile
+
+from jaxgest.errors import DataError
+from jaxgest.motion.synthetic.content import CONTENTS
+from jaxgest.motion.synthetic.styles import STYLES
+
+MANIFEST_COLUMNS = ("path", "content", "style", "audio")
+
+
+def clip_plan(clips=None, contents=None, styles=None):
+    """The (content, style, take) triples of a dataset, content-major: the first clips show one content in
+    every style, then the next content, ...; takes k >= 1 (new performance seeds) follow when ``clips``
+    exceeds contents x styles. ``clips=None`` means every content in every style once."""
+    contents = list(contents or CONTENTS)
+    styles = list(styles or STYLES)
+    grid = list(itertools.product(contents, styles))
+    n = len(grid) if clips is None else int(clips)
+    if n < 1:
+        raise DataError(f"synth: --clips must be at least 1, got {n}")
+    return [(c, s, k // len(grid)) for k, (c, s) in zip(range(n), itertools.cycle(grid))]
+
+
+def write_dataset(out_dir, clips=None, seed: int = 0, fps: float = 60.0, seconds: float = 10.0,
+                  progress: bool = True) -> pathlib.Path:
+    """Render and write the built-in dataset; returns the path of ``manifest.csv``.
+
+    Files: ``{content}_{style}_{k}.bvh`` (k = take), the matching ``.wav`` (16 kHz mono), and
+    ``manifest.csv`` with columns path, content, style, audio (paths relative to ``out_dir``). The script
+    (strokes, audio) of each content depends on ``seed``; the performance noise on ``seed`` and the take.
+    """
+    import soundfile as sf
+    from tqdm import tqdm
+
+    from jaxgest.motion import bvh
+    from jaxgest.motion.synthetic import SAMPLE_RATE, render_clip
+
+    out = pathlib.Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise DataError(f"{out}: exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise DataError(f"{out}: cannot create output directory ({e.strerror})") from None
+    if seconds < 2.0:
+        raise DataError(f"synth: clips must be at least 2 s long, got {seconds}")
+    rows = []
+    plan = clip_plan(clips)
+    specs = {c: CONTENTS[c].with_seed(seed, seconds) for c in {p[0] for p in plan}}
+    for content, style, take in tqdm(plan, desc="synth", unit="clip", disable=not progress):
+        motion, audio, sr = render_clip(specs[content], style, seed=1000 * int(seed) + take, fps=fps,
+                                        sr=SAMPLE_RATE)
+        stem = f"{content}_{style}_{take}"
+        motion = motion.replace(name=stem)
+        bvh.save(motion, out / f"{stem}.bvh")
+        sf.write(str(out / f"{stem}.wav"), audio, sr, subtype="PCM_16")
+        rows.append({"path": f"{stem}.bvh", "content": content, "style": style, "audio": f"{stem}.wav"})
+    manifest = out / "manifest.csv"
+    fd, tmp = tempfile.mkstemp(prefix=".manifest.", suffix=".csv", dir=out)
+    with os.fdopen(fd, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=MANIFEST_COLUMNS)
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, manifest)
+    return manifest

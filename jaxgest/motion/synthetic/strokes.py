@@ -1,0 +1,118 @@
+"""Gesture strokes as keyframed hand / torso poses, and their timelines under a style.
+
+Hand targets are (out, up, forward) in cm relative to the upper-arm joint, in the body's yaw frame, so
+"out" is away from the body's midline for either hand. A stroke is a few keys at times relative to its
+apex (seconds at tempo 1): preparation, apex (on the audio onset), hold; then a retraction to the rest
+pose unless the next stroke follows too closely. Keys are joined by minimum-jerk segments
+(References: Flash & Hogan 1985), then the style's low-pass filter and tremor are applied.
+
+| stroke    | prep (t, target)      | apex target    | hold (t, target)     | torso pitch / head at apex | extra                   |
+|-----------|-----------------------|----------------|----------------------|----------------------------|-------------------------|
+| beat      | -0.30 (14, -18, 26)   | (13, -30, 28)  | +0.18 (13, -27, 27)  | +2 / +5                    |                         |
+| point     | -0.45 (18, -20, 25)   | (22, 2, 40)    | +0.45 (22, 3, 40)    | +3 / 0                     |                         |
+| wave      | -0.50 (22, 0, 12)     | (26, 16, 12)   | +1.00 (26, 16, 12)   | 0 / -3                     | lateral 9 cm at 2.2 Hz  |
+| raise     | -0.50 (14, 5, 15)     | (10, 40, 8)    | +0.50 (10, 40, 8)    | -4 / -6                    |                         |
+| bow       | -0.60 (6, -44, 8)     | (4, -44, 10)   | +0.40 (4, -44, 10)   | +35 / +15                  | prep pitch +10          |
+| arms-open | -0.45 (18, -20, 24)   | (40, -12, 22)  | +0.35 (42, -10, 20)  | -3 / -4                    | shrug 6 deg             |
+
+Rest hand target: (7, -44, 5); retraction takes 0.55 s at tempo 1.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+REST_HAND = np.array([7.0, -44.0, 5.0])
+RETRACT = 0.55
+
+# kind -> list of (t, hand target, torso pitch, head pitch, shrug); the key with t == 0 is the apex
+KEYS = {
+    "beat": [(-0.30, (14, -18, 26), 0, 0, 0), (0.0, (13, -30, 28), 2, 5, 0), (0.18, (13, -27, 27), 1, 2, 0)],
+    "point": [(-0.45, (18, -20, 25), 1, 0, 0), (0.0, (22, 2, 40), 3, 0, 2), (0.45, (22, 3, 40), 3, 0, 2)],
+    "wave": [(-0.50, (22, 0, 12), 0, 0, 2), (0.0, (26, 16, 12), 0, -3, 4), (1.00, (26, 16, 12), 0, -3, 4)],
+    "raise": [(-0.50, (14, 5, 15), -1, 0, 3), (0.0, (10, 40, 8), -4, -6, 8), (0.50, (10, 40, 8), -4, -6, 8)],
+    "bow": [(-0.60, (6, -44, 8), 10, 5, 0), (0.0, (4, -44, 10), 35, 15, 0), (0.40, (4, -44, 10), 35, 15, 0)],
+    "arms-open": [
+        (-0.45, (18, -20, 24), 0, 0, 0),
+        (0.0, (40, -12, 22), -3, -4, 6),
+        (0.35, (42, -10, 20), -3, -4, 6),
+    ],
+}
+WAVE_AMP, WAVE_HZ = 9.0, 2.2
+
+
+def min_jerk(tau):
+    """Minimum-jerk blend 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1]. References: Flash & Hogan 1985."""
+    tau = np.clip(tau, 0.0, 1.0)
+    return tau**3 * (10 - 15 * tau + 6 * tau * tau)
+
+
+def interpolate_keys(times, values, t):
+    """Piecewise minimum-jerk interpolation of keys (K,), (K, C) at times t (F,) -> (F, C)."""
+    times = np.asarray(times, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1)
+    k1 = np.minimum(k + 1, len(times) - 1)
+    span = np.maximum(times[k1] - times[k], 1e-9)
+    w = np.where(k1 > k, min_jerk((t - times[k]) / span), 0.0)[:, None]
+    return values[k] * (1 - w) + values[k1] * w
+
+
+def _add_keys(keys, new, is_apex):
+    """Append one stroke's keys to a timeline, trimming what overlaps; apex keys are never dropped."""
+    t_first = new[0][0]
+    while keys and keys[-1][0] > t_first - 0.08 and not keys[-1][2]:
+        keys.pop()
+    for (t, v), ap in zip(new, is_apex):
+        if keys and t <= keys[-1][0] + 0.08 and not ap:
+            continue
+        if keys and t <= keys[-1][0]:  # an apex inside the previous hold: cut the hold
+            while keys and keys[-1][0] >= t - 0.05 and not keys[-1][2]:
+                keys.pop()
+        keys.append((t, v, ap))
+
+
+def stroke_tracks(script, style, t):
+    """Keyframed tracks of ``script`` performed in ``style`` at frame times ``t`` (F,).
+
+    Returns ``hand`` {"L","R"}: (F, 3) targets, ``torso_pitch`` (F,), ``head_pitch`` (F,),
+    ``shrug`` {"L","R"}: (F,) and ``activity`` {"L","R"}: (F,) in [0, 1] (how far each hand is from rest).
+    """
+    dominant = "R" if style.handedness == "right" else "L"
+    other = "L" if dominant == "R" else "R"
+    hand_keys = {"L": [(0.0, REST_HAND, False)], "R": [(0.0, REST_HAND, False)]}
+    body_keys = [(0.0, np.zeros(2), False)]
+    shrug_keys = {"L": [(0.0, np.zeros(1), False)], "R": [(0.0, np.zeros(1), False)]}
+    osc = {"L": np.zeros((len(t), 3)), "R": np.zeros((len(t), 3))}
+    scale = np.array([style.width, 1.0, 1.0])
+    for s in script.strokes:
+        keys = KEYS[s.kind]
+        times = [s.apex + k[0] / style.tempo for k in keys]
+        is_apex = [k[0] == 0.0 for k in keys]
+        gain = style.amplitude * s.intensity
+        targets = [REST_HAND + gain * scale * (np.array(k[1], float) - REST_HAND) + [0, style.hand_height, 0]
+                   for k in keys]
+        sides = [dominant, other] if s.hands == "both" else [dominant]
+        end = times[-1] + RETRACT / style.tempo
+        for side in sides:
+            _add_keys(hand_keys[side], list(zip(times + [end], targets + [REST_HAND])), is_apex + [False])
+            _add_keys(shrug_keys[side], [(tk, np.array([gain * k[4]])) for tk, k in zip(times, keys)]
+                      + [(end, np.zeros(1))], is_apex + [False])
+            if s.kind == "wave":
+                hold = (t >= times[1]) & (t <= times[2])
+                env = np.sin(np.pi * np.clip((t - times[1]) / (times[2] - times[1]), 0, 1)) * hold
+                osc[side][:, 0] += gain * WAVE_AMP * env * np.sin(2 * np.pi * WAVE_HZ * style.tempo * (t - times[1]))
+        body = [(tk, gain * np.array([k[2], k[3]], float)) for tk, k in zip(times, keys)]
+        _add_keys(body_keys, body + [(end, np.zeros(2))], is_apex + [False])
+    out = {"hand": {}, "shrug": {}, "activity": {}}
+    for side in ("L", "R"):
+        tk, vk, _ = zip(*hand_keys[side])
+        h = interpolate_keys(tk, np.stack(vk), t) + osc[side]
+        out["hand"][side] = h
+        out["activity"][side] = np.clip(np.linalg.norm(h - REST_HAND, axis=-1) / 40.0, 0.0, 1.0)
+        tk, vk, _ = zip(*shrug_keys[side])
+        out["shrug"][side] = interpolate_keys(tk, np.stack(vk), t)[:, 0]
+    tk, vk, _ = zip(*body_keys)
+    b = interpolate_keys(tk, np.stack(vk), t)
+    out["torso_pitch"], out["head_pitch"] = b[:, 0], b[:, 1]
+    return out

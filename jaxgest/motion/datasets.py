@@ -296,13 +296,17 @@ class NormStats:
         return cls(x.mean(0), np.maximum(x.std(0), eps), float(eps))
 
     def _cast(self, x):
+        """mean, std in x's array library and dtype, with explicit leading axes (strict rank promotion)."""
         import jax
 
+        lead = (1,) * (np.ndim(x) - self.mean.ndim)
+        mean, std = self.mean.reshape(lead + self.mean.shape), self.std.reshape(lead + self.std.shape)
         if isinstance(x, jax.Array):
             import jax.numpy as jnp
 
-            return jnp.asarray(self.mean, x.dtype), jnp.asarray(self.std, x.dtype)
-        return self.mean.astype(np.asarray(x).dtype, copy=False), self.std.astype(np.asarray(x).dtype, copy=False)
+            return jnp.asarray(mean, x.dtype), jnp.asarray(std, x.dtype)
+        dt = np.asarray(x).dtype
+        return mean.astype(dt, copy=False), std.astype(dt, copy=False)
 
     def normalize(self, x):
         mean, std = self._cast(x)

@@ -99,7 +99,7 @@ def make_script(spec: ContentSpec) -> Script:
     """Syllables (phrases with pauses) and strokes on stressed onsets, deterministic in ``spec.seed``."""
     rng = np.random.default_rng(spec.seed)
     onsets, durs, stress = [], [], []
-    t = 0.5 + rng.uniform(0.0, 0.3)
+    t = 1.0 + rng.uniform(0.0, 0.3)
     end = spec.seconds - 0.8
     while t < end:
         phrase_end = min(t + rng.uniform(1.6, 3.2), end)

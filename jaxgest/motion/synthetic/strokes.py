@@ -4,7 +4,7 @@ Hand targets are (out, up, forward) in cm relative to the upper-arm joint, in th
 "out" is away from the body's midline for either hand. A stroke is a few keys at times relative to its
 apex (seconds at tempo 1): preparation, apex (on the audio onset), hold; then a retraction to the rest
 pose unless the next stroke follows too closely. Keys are joined by minimum-jerk segments
-(References: Flash & Hogan 1985), then the style's low-pass filter and tremor are applied.
+(References: Flash & Hogan 1985), hand keys along arcs around the shoulder, then the style's low-pass filter and tremor are applied.
 
 | stroke    | prep (t, target)      | apex target    | hold (t, target)     | torso pitch / head at apex | extra                   |
 |-----------|-----------------------|----------------|----------------------|----------------------------|-------------------------|
@@ -58,6 +58,29 @@ def interpolate_keys(times, values, t):
     return values[k] * (1 - w) + values[k1] * w
 
 
+def interpolate_hand_keys(times, values, t, min_radius: float = 20.0):
+    """Like :func:`interpolate_keys` for hand targets relative to the shoulder, but along arcs: the
+    direction is slerped and the distance interpolated, so a hand moving from above the head to the hip
+    swings around the shoulder instead of folding the arm through it."""
+    times = np.asarray(times, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1)
+    k1 = np.minimum(k + 1, len(times) - 1)
+    span = np.maximum(times[k1] - times[k], 1e-9)
+    w = np.where(k1 > k, min_jerk((t - times[k]) / span), 0.0)[:, None]
+    a, b = values[k], values[k1]
+    ra, rb = np.linalg.norm(a, axis=-1, keepdims=True), np.linalg.norm(b, axis=-1, keepdims=True)
+    ua, ub = a / np.maximum(ra, 1e-9), b / np.maximum(rb, 1e-9)
+    theta = np.arccos(np.clip(np.sum(ua * ub, axis=-1, keepdims=True), -1.0, 1.0))
+    small = theta < 1e-4
+    sin_t = np.where(small, 1.0, np.sin(theta))
+    wa = np.where(small, 1 - w, np.sin((1 - w) * theta) / sin_t)
+    wb = np.where(small, w, np.sin(w * theta) / sin_t)
+    u = wa * ua + wb * ub
+    u /= np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-9)
+    return u * np.maximum(ra * (1 - w) + rb * w, min_radius)
+
+
 def _add_keys(keys, new, is_apex):
     """Append one stroke's keys to a timeline, trimming what overlaps; apex keys are never dropped."""
     t_first = new[0][0]
@@ -87,7 +110,8 @@ def stroke_tracks(script, style, t):
     scale = np.array([style.width, 1.0, 1.0])
     for s in script.strokes:
         keys = KEYS[s.kind]
-        times = [s.apex + k[0] / style.tempo for k in keys]
+        # preparation at least 0.28 s before the apex: fast styles stay within human joint speeds
+        times = [s.apex + (min(k[0] / style.tempo, -0.28) if k[0] < 0 else k[0] / style.tempo) for k in keys]
         is_apex = [k[0] == 0.0 for k in keys]
         gain = style.amplitude * s.intensity
         targets = [REST_HAND + gain * scale * (np.array(k[1], float) - REST_HAND) + [0, style.hand_height, 0]
@@ -107,7 +131,7 @@ def stroke_tracks(script, style, t):
     out = {"hand": {}, "shrug": {}, "activity": {}}
     for side in ("L", "R"):
         tk, vk, _ = zip(*hand_keys[side])
-        h = interpolate_keys(tk, np.stack(vk), t) + osc[side]
+        h = interpolate_hand_keys(tk, np.stack(vk), t) + osc[side]
         out["hand"][side] = h
         out["activity"][side] = np.clip(np.linalg.norm(h - REST_HAND, axis=-1) / 40.0, 0.0, 1.0)
         tk, vk, _ = zip(*shrug_keys[side])

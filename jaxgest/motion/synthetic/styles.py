@@ -7,7 +7,7 @@ be checked against the clip rendered directly in the target style (exact ground 
 | style       | amplitude | tempo | hand_height cm | lean deg | tremor cm | smoothness s | handedness | head_pitch deg | sway | width |
 |-------------|-----------|-------|----------------|----------|-----------|--------------|------------|----------------|------|-------|
 | neutral     | 1.00      | 1.00  |  0             |  0       | 0.0       | 0.08         | right      |  0             | 1.0  | 1.00  |
-| energetic   | 1.45      | 1.50  | +8             | +4       | 0.0       | 0.04         | right      | -4             | 1.5  | 1.20  |
+| energetic   | 1.35      | 1.35  | +8             | +4       | 0.0       | 0.04         | right      | -4             | 1.5  | 1.20  |
 | sad         | 0.50      | 0.65  | -12            | +14      | 0.0       | 0.16         | right      | +18            | 0.5  | 0.80  |
 | tense       | 0.75      | 1.25  | +4             | +3       | 1.2       | 0.02         | right      | +4             | 0.3  | 0.70  |
 | relaxed     | 0.90      | 0.80  | -4             | -2       | 0.0       | 0.22         | right      |  0             | 1.4  | 1.10  |
@@ -60,7 +60,7 @@ STYLES: dict = {
     s.name: s
     for s in (
         StyleParams("neutral"),
-        StyleParams("energetic", amplitude=1.45, tempo=1.5, hand_height=8.0, lean=4.0, smoothness=0.04,
+        StyleParams("energetic", amplitude=1.35, tempo=1.35, hand_height=8.0, lean=4.0, smoothness=0.04,
                     head_pitch=-4.0, sway=1.5, width=1.2),
         StyleParams("sad", amplitude=0.5, tempo=0.65, hand_height=-12.0, lean=14.0, smoothness=0.16,
                     head_pitch=18.0, sway=0.5, width=0.8),

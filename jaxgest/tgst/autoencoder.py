@@ -25,14 +25,20 @@ def _pytorch_padding(kernel: int) -> tuple[tuple[int, int]]:
 def upsample_linear(x: jax.Array, factor: int) -> jax.Array:
     """Linear upsampling along frames ``(batch, F, ch) -> (batch, factor * F, ch)``.
 
-    ``jax.image.resize(..., "linear")`` uses half-pixel centres and renormalised edge weights, which for
-    integer upsampling equals ``torch.nn.Upsample(mode="linear", align_corners=False)`` (edge frames are
-    clamped). References: Kuriyama et al. 2022, App. A.
+    Same as ``torch.nn.Upsample(mode="linear", align_corners=False)`` (half-pixel centres, edge frames
+    clamped) and as ``jax.image.resize(..., "linear")``. The x2 case is written out (out[2k] = 3/4 x[k] +
+    1/4 x[k-1], out[2k+1] = 3/4 x[k] + 1/4 x[k+1], clamped at the ends): it compiles and runs much faster
+    than the general resize. References: Kuriyama et al. 2022, App. A.
     """
     if factor == 1:
         return x
     b, f, c = x.shape
-    return jax.image.resize(x, (b, f * factor, c), method="linear")
+    if factor != 2:
+        return jax.image.resize(x, (b, f * factor, c), method="linear")
+    prev = jnp.concatenate([x[:, :1], x[:, :-1]], axis=1)
+    nxt = jnp.concatenate([x[:, 1:], x[:, -1:]], axis=1)
+    even, odd = 0.75 * x + 0.25 * prev, 0.75 * x + 0.25 * nxt
+    return jnp.stack([even, odd], axis=2).reshape(b, 2 * f, c)
 
 
 class _ConvStack(nn.Module):
@@ -142,7 +148,8 @@ def angular_error_rad(pred: jax.Array, target: jax.Array) -> jax.Array:
     shape = pred.shape[:-1] + (pred.shape[-1] // 3, 3)
     qp = rotations.expmap_to_quat(jnp.reshape(pred, shape))
     qt = rotations.expmap_to_quat(jnp.reshape(target, shape))
-    return rotations.quat_angle(rotations.quat_mul(rotations.quat_inv(qt), qp))
+    qt_conj = jnp.concatenate([qt[..., :1], -qt[..., 1:]], axis=-1)  # inverse of a unit quaternion
+    return rotations.quat_angle(rotations.quat_mul(qt_conj, qp))
 
 
 def mean_angular_error_deg(pred: jax.Array, target: jax.Array) -> jax.Array:

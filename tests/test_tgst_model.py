@@ -1,0 +1,256 @@
+"""TGST (paper 000) models: parameter counts, attention band, transfer API, training steps."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxgest.tgst import api
+from jaxgest.tgst.autoencoder import (MotionAutoencoder, expmap_reconstruction_loss, mean_angular_error_deg,
+                                      upsample_linear)
+from jaxgest.tgst.config import TGSTConfig, config_from_dict, get_config
+from jaxgest.tgst.model import init_params, transfer_arrays
+from jaxgest.tgst.steps import (create_ae_state, create_transformer_state, make_ae_train_step,
+                                make_transformer_train_step)
+from jaxgest.tgst.tokens import ClipTooShortError
+from jaxgest.tgst.transformer import (StyleTransformer, StyleTransformerEncoder, band_mask,
+                                      blockwise_banded_attention, dense_banded_attention)
+
+TINY = get_config("tiny")
+# omega = 2 so that the band matters on short test clips (7 tokens for 64 frames)
+CFG = dataclasses.replace(TINY, transformer=dataclasses.replace(TINY.transformer, omega=2, block_size=4))
+
+
+def _normal(seed, shape, scale=1.0):
+    return jnp.asarray(scale * np.random.default_rng(seed).normal(size=shape), jnp.float32)
+
+
+def _smooth_motion(seed, batch, frames, channels):
+    """Smooth sinusoidal exp-maps (learnable by the conv autoencoder)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(frames)[None, :, None] / 60.0
+    freq, phase, amp = (rng.uniform(0.3, 2.0, (batch, 1, channels)), rng.uniform(0, 6, (batch, 1, channels)),
+                        rng.uniform(0.1, 0.6, (batch, 1, channels)))
+    return jnp.asarray(amp * np.sin(2 * np.pi * freq * t + phase), jnp.float32)
+
+
+@pytest.fixture(scope="module")
+def params():
+    return jax.jit(init_params, static_argnums=0)(CFG, jax.random.PRNGKey(0))
+
+
+def _count(tree):
+    return int(sum(x.size for x in jax.tree_util.tree_leaves(tree)))
+
+
+# ---------------------------------------------------------------- sizes and configs
+
+def test_param_counts_paper():
+    assert api.count_params("paper") == {"autoencoder": 23743, "transformer": 50240}
+
+
+@pytest.mark.parametrize("variant", ["paper", "authors"])
+@pytest.mark.parametrize("lns,expected", [(1, 50240), (2, 50496)])
+def test_transformer_param_count_layernorms(variant, lns, expected):
+    tcfg = dataclasses.replace(get_config("paper").transformer, layernorms_per_block=lns, variant=variant)
+    tok = jnp.zeros((1, 5, 64))
+    shapes = jax.eval_shape(StyleTransformer(tcfg).init, jax.random.PRNGKey(0), tok, tok)
+    assert _count(shapes) == expected
+
+
+def test_autoencoder_layer_sizes_and_shapes():
+    ae = MotionAutoencoder(get_config("paper").autoencoder)
+    shapes = jax.eval_shape(ae.init, jax.random.PRNGKey(0), jnp.zeros((2, 64, 39)))["params"]
+    sizes = {part: [_count(shapes[part][f"conv_{i}"]) for i in range(3)]
+             for part in ("encoder", "upper_decoder", "lower_decoder")}
+    assert sizes == {"encoder": [2560, 6176, 1552], "upper_decoder": [1568, 6208, 2535],
+                     "lower_decoder": [784, 1568, 792]}
+    variables = {"params": shapes}
+    z = jax.eval_shape(lambda v, x: ae.apply(v, x, method=MotionAutoencoder.encode), variables,
+                       jnp.zeros((2, 64, 39)))
+    assert z.shape == (2, 16, 16)
+    (up, lo), _ = jax.eval_shape(ae.apply, variables, jnp.zeros((2, 64, 39)))
+    assert up.shape == (2, 64, 39) and lo.shape == (2, 64, 24)
+
+
+def test_config_json_round_trip_and_validation():
+    for name in ("paper", "tiny"):
+        cfg = get_config(name)
+        assert config_from_dict(json.loads(json.dumps(dataclasses.asdict(cfg)))) == cfg
+        hash(cfg)  # usable as a jit static argument
+    with pytest.raises(ValueError):
+        get_config("huge")
+    with pytest.raises(ValueError, match="block_size"):
+        TGSTConfig(transformer=dataclasses.replace(TINY.transformer, block_size=8))
+
+
+def test_upsample_matches_pytorch_linear_align_corners_false():
+    x = np.random.default_rng(0).normal(size=(1, 7, 3)).astype(np.float32)
+    src = np.clip((np.arange(14) + 0.5) / 2 - 0.5, 0, None)
+    i0 = np.floor(src).astype(int)
+    i1 = np.minimum(i0 + 1, 6)
+    lam = (src - i0)[None, :, None]
+    expected = (1 - lam) * x[:, i0] + lam * x[:, i1]
+    np.testing.assert_allclose(np.asarray(upsample_linear(jnp.asarray(x), 2)), expected, atol=1e-6)
+    resized = jax.image.resize(jnp.asarray(x), (1, 14, 3), method="linear")
+    np.testing.assert_allclose(np.asarray(resized), expected, atol=1e-6)
+
+
+def test_reconstruction_loss_and_angle():
+    target = _normal(0, (2, 8, 6), 0.5)
+    np.testing.assert_array_equal(np.asarray(expmap_reconstruction_loss(target, target)), 0.0)
+    axis = np.array([0.0, 0.6, 0.8], np.float32)
+    rot = jnp.asarray(np.tile(axis * 0.3, (2, 8, 2)))
+    pred = rot + jnp.asarray(np.tile(axis * 0.1, (2, 8, 2)))  # same axis, 0.1 rad further
+    np.testing.assert_allclose(np.asarray(expmap_reconstruction_loss(pred, rot)), 0.1, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(mean_angular_error_deg(pred, rot)), np.degrees(0.1), rtol=1e-3)
+    full_turn = rot + jnp.asarray(np.tile(axis * 2 * np.pi, (2, 8, 2)))  # same rotation, other exp-map
+    assert float(mean_angular_error_deg(full_turn, rot).max()) < 0.05
+
+
+# ---------------------------------------------------------------- attention band
+
+@pytest.mark.parametrize("variant", ["paper", "authors"])
+@pytest.mark.parametrize("n", [1, 9, 23])
+def test_blockwise_equals_dense(variant, n):
+    q, k, v = (_normal(s, (2, n + 1, 8)) for s in (1, 2, 3))
+
+    @jax.jit
+    def both(q, k, v):
+        dense, _ = dense_banded_attention(q, k, v, omega=3, variant=variant)
+        return dense, blockwise_banded_attention(q, k, v, omega=3, variant=variant, block_size=4)
+
+    dense, block = both(q, k, v)
+    np.testing.assert_allclose(np.asarray(block), np.asarray(dense), atol=1e-5)
+
+
+def test_band_masks():
+    m = band_mask(8, omega=2, variant="paper")
+    assert m[0].all() and m[:, 0].all()
+    assert m[5, 3] and m[5, 7] and not m[5, 2] and not m[5, 8]
+    a = band_mask(8, omega=2, variant="authors")
+    assert a[0].all() and a[2, 0] and not a[3, 0]  # CLS visible to gesture rows i <= omega only
+    assert a[5, 3] and a[5, 6] and not a[5, 7] and not a[5, 2]  # i - omega <= j < i + omega
+
+
+@pytest.fixture(scope="module")
+def encoders():
+    """Jitted encoders (blockwise, dense) sharing one set of parameters; omega = 3, 24 tokens."""
+    out = {}
+    tok = _normal(0, (1, 24, 64))
+    variables = None
+    for impl in ("blockwise", "dense"):
+        tcfg = dataclasses.replace(TINY.transformer, omega=3, block_size=4, attention_impl=impl)
+        enc = StyleTransformerEncoder(tcfg)
+        variables = variables or enc.init(jax.random.PRNGKey(1), tok)
+        out[impl] = jax.jit(lambda t, enc=enc: enc.apply(variables, t))
+    return out, tok
+
+
+def test_encoder_blockwise_equals_dense(encoders):
+    fns, tok = encoders
+    (yb, auxb), (yd, auxd) = fns["blockwise"](tok), fns["dense"](tok)
+    np.testing.assert_allclose(np.asarray(yb), np.asarray(yd), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(auxb["keys"]), np.asarray(auxd["keys"]), atol=1e-6)
+    assert auxd["attention"].shape == (1, 25, 25) and "attention" not in auxb
+
+
+@settings(max_examples=15, deadline=None)
+@given(i=st.integers(0, 23), j=st.integers(0, 23), impl=st.sampled_from(["blockwise", "dense"]))
+def test_tokens_beyond_omega_have_no_influence(encoders, i, j, impl):
+    fns, tok = encoders
+    y0, aux0 = fns[impl](tok)
+    y1, aux1 = fns[impl](tok.at[0, j].add(_normal(99, (64,))))  # not constant: LayerNorm would remove it
+    changed = not np.allclose(np.asarray(y0[0, 1 + i]), np.asarray(y1[0, 1 + i]), atol=1e-5)
+    assert changed == (abs(i - j) <= 3)
+    assert not np.allclose(np.asarray(aux0["cls"]), np.asarray(aux1["cls"]))  # CLS attends to all
+
+
+# ---------------------------------------------------------------- transfer API
+
+def test_all_methods_run_with_right_shapes(params):
+    content, style = _smooth_motion(1, 2, 50, 39), _smooth_motion(2, 2, 70, 39)
+    for method in ("soft", "hard", "adain", "avatarnet"):
+        up, lo, aux = jax.jit(transfer_arrays, static_argnames=("cfg", "method"))(
+            params, content, style, cfg=CFG, method=method)
+        assert up.shape == (2, 50, 39) and lo.shape == (2, 50, 24), method
+        assert bool(jnp.isfinite(up).all() & jnp.isfinite(lo).all()), method
+    assert aux["content_latents"].shape == (2, 16, 16)  # 50 frames -> padded 64 -> 16 latent frames
+
+
+@pytest.fixture(scope="module")
+def traced_soft():
+    @jax.jit
+    @chex.assert_max_traces(n=1)
+    def fn(params, content, style):
+        return transfer_arrays(params, content, style, cfg=CFG, method="soft")
+
+    return fn
+
+
+def test_jit_equals_eager_and_no_retrace(params, traced_soft):
+    content, style = _smooth_motion(3, 1, 40, 39), _smooth_motion(4, 1, 33, 39)
+    up_j, lo_j, aux_j = traced_soft(params, content, style)
+    up_e, lo_e, _ = transfer_arrays(params, content, style, cfg=CFG, method="soft")  # op by op
+    np.testing.assert_allclose(np.asarray(up_j), np.asarray(up_e), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(lo_j), np.asarray(lo_e), atol=1e-5)
+    w = aux_j["swap_weights"]  # soft swap weights: rows on the simplex over the style tokens
+    np.testing.assert_allclose(np.asarray(w.sum(-1)), 1.0, rtol=1e-5)
+    traced_soft(params, content + 0.1, style - 0.1)  # same shapes: must not retrace
+    with pytest.raises(AssertionError):
+        traced_soft(params, _smooth_motion(5, 1, 48, 39), style)  # new shape retraces (the guard works)
+
+
+def test_short_clip_error(params):
+    with pytest.raises(ClipTooShortError, match="15 frames"):
+        transfer_arrays(params, jnp.zeros((1, 15, 39)), jnp.zeros((1, 32, 39)), cfg=CFG)
+    with pytest.raises(ClipTooShortError):
+        transfer_arrays(params, jnp.zeros((1, 32, 39)), jnp.zeros((1, 8, 39)), cfg=CFG)
+
+
+def test_authors_variant_runs(params):
+    acfg = dataclasses.replace(CFG, transformer=dataclasses.replace(CFG.transformer, variant="authors"))
+    content = jnp.concatenate([_smooth_motion(6, 1, 32, 39)] * 2)  # the same clip twice
+    up, lo, _ = jax.jit(transfer_arrays, static_argnames=("cfg", "method"))(
+        params, content, _smooth_motion(7, 2, 40, 39), cfg=acfg)
+    assert up.shape == (2, 32, 39) and bool(jnp.isfinite(up).all())
+
+
+# ---------------------------------------------------------------- training steps
+
+def test_ae_loss_decreases(params):
+    tx = optax.adam(3e-3)
+    state = create_ae_state(CFG, jax.tree_util.tree_map(jnp.copy, params["autoencoder"]), tx)  # donated
+    step = jax.jit(make_ae_train_step(CFG, tx), donate_argnums=(0,))
+    batch = {"upper": _smooth_motion(10, 4, 64, 39), "lower": _smooth_motion(11, 4, 64, 24)}
+    key = jax.random.PRNGKey(0)
+    state, first = step(state, batch, key)
+    for _ in range(29):
+        state, metrics = step(state, batch, key)
+    assert set(metrics) == {"loss", "upper_loss", "lower_loss", "angle_deg"}
+    assert float(metrics["loss"]) < 0.8 * float(first["loss"])
+    assert float(metrics["angle_deg"]) < float(first["angle_deg"])
+    assert int(state.step) == 30
+
+
+def test_transformer_loss_decreases(params):
+    tx = optax.adam(1e-3)
+    state = create_transformer_state(CFG, jax.tree_util.tree_map(jnp.copy, params["transformer"]), tx)
+    step = jax.jit(make_transformer_train_step(CFG, tx, params["autoencoder"]), donate_argnums=(0,))
+    batch = {"content": _smooth_motion(12, 2, 64, 39), "style": _smooth_motion(13, 2, 48, 39)}
+    key = jax.random.PRNGKey(0)
+    state, first = step(state, batch, key)
+    for _ in range(29):
+        state, metrics = step(state, batch, key)
+    assert set(metrics) == {"loss", "identity", "cyclic", "structure", "appearance"}
+    assert all(bool(jnp.isfinite(v)) for v in metrics.values())
+    assert float(metrics["loss"]) < 0.8 * float(first["loss"])

@@ -1,0 +1,235 @@
+"""Subprocess worker of tests/test_parallel.py: train registered models data-parallel on N devices.
+
+Run as ``python tests/_parallel_worker.py --devices N --steps K --batch B --seed S --out DIR [--model M ...]``
+in a process whose ``XLA_FLAGS`` holds ``--xla_force_host_platform_device_count=4`` (set by the parent
+before this interpreter imports jax; ``--host-devices`` sets it here otherwise). For every model it runs
+``K`` steps of :func:`jaxgest.training.train_loop` through :mod:`jaxgest.parallel` and writes
+
+* ``DIR/<model>.npz``: the final parameters, keyed by their pytree path;
+* ``DIR/<model>/metrics.jsonl``: the MetricsLogger output with the device info as extra fields;
+* ``DIR/info.json``: per model the losses, how the first batch and the final parameters are laid out over
+  the devices, whether the compiled step all-reduces, and the errors of bad device/batch requests.
+
+Registry. ``BUILDERS`` maps a model name to ``builder(seed, batch_size) -> (state, step_fn, batch_fn)``:
+``state`` a fresh ``TrainState`` built from ``seed`` alone, ``step_fn`` the *un-jitted*
+``(state, batch, key) -> (state, metrics)`` with a ``loss`` metric that averages over the batch, and
+``batch_fn(i)`` the host-global numpy batch pytree of step ``i`` (every leaf ``(batch_size, ...)``), a pure
+function of ``(seed, i)``. To check another model (``tgst_ae``, ``tgst_transformer``, ``zeggs``), add a
+builder that uses its ``tiny`` preset and register it with ``@register("name")``; the test picks every
+registered name up through ``--list``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import sys
+
+if __name__ == "__main__" and "--host-devices" in sys.argv:  # before jax is imported
+    _n = sys.argv[sys.argv.index("--host-devices") + 1]
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={_n}")
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+BUILDERS: dict = {}
+
+
+def register(name: str):
+    """Decorator adding ``builder(seed, batch_size) -> (state, step_fn, batch_fn)`` to ``BUILDERS``."""
+
+    def deco(fn):
+        BUILDERS[name] = fn
+        return fn
+
+    return deco
+
+
+def _regression_step(module):
+    """Adam step on a mean squared error, with a key folded in (dropout-free models ignore it)."""
+
+    def step(state, batch, key):
+        del key
+
+        def loss_fn(params):
+            pred = module.apply({"params": params}, batch["x"])
+            return jnp.mean((pred - batch["y"]) ** 2)
+
+        loss, grads = jax.value_and_grad(loss_fn)(state.params)
+        return state.apply_gradients(grads=grads), {"loss": loss, "grad_norm": _global_norm(grads)}
+
+    return step
+
+
+def _global_norm(tree):
+    return jnp.sqrt(sum(jnp.sum(x**2) for x in jax.tree_util.tree_leaves(tree)))
+
+
+@register("toy_mlp")
+def build_toy_mlp(seed: int, batch_size: int):
+    """2-layer GELU MLP regressing a fixed random nonlinear map, 8 -> 32 -> 4."""
+    import flax.linen as nn
+    import optax
+
+    from jaxgest.training import TrainState
+
+    class MLP(nn.Module):
+        @nn.compact
+        def __call__(self, x):
+            return nn.Dense(4)(nn.gelu(nn.Dense(32)(x)))
+
+    module = MLP()
+    params = module.init(jax.random.PRNGKey(seed), jnp.zeros((1, 8), jnp.float32))["params"]
+    state = TrainState.create(apply_fn=module.apply, params=params, tx=optax.adam(1e-2))
+    w = np.random.default_rng(seed + 1000).normal(size=(8, 4)).astype(np.float32)
+
+    def batch_fn(i):
+        rng = np.random.default_rng([seed, i])
+        x = rng.normal(size=(batch_size, 8)).astype(np.float32)
+        return {"x": x, "y": np.tanh(x @ w).astype(np.float32)}
+
+    return state, _regression_step(module), batch_fn
+
+
+@register("toy_conv1d")
+def build_toy_conv1d(seed: int, batch_size: int):
+    """Conv1d over time (B, 16 frames, 6 ch) -> (B, 16, 3), like the motion autoencoders in miniature."""
+    import flax.linen as nn
+    import optax
+
+    from jaxgest.training import TrainState
+
+    class Conv(nn.Module):
+        @nn.compact
+        def __call__(self, x):
+            h = nn.gelu(nn.Conv(12, (3,), strides=(2,))(x))
+            h = jax.image.resize(h, (h.shape[0], x.shape[1], h.shape[2]), "linear")
+            return nn.Conv(3, (3,))(h)
+
+    module = Conv()
+    params = module.init(jax.random.PRNGKey(seed), jnp.zeros((1, 16, 6), jnp.float32))["params"]
+    state = TrainState.create(apply_fn=module.apply, params=params, tx=optax.adam(1e-2))
+
+    def batch_fn(i):
+        rng = np.random.default_rng([seed, i])
+        x = np.cumsum(rng.normal(size=(batch_size, 16, 6)), axis=1).astype(np.float32) * 0.3
+        y = np.stack([x[..., 0] * x[..., 1], np.sin(x[..., 2]), x[..., 3] - x[..., 5]], axis=-1)
+        return {"x": x, "y": y.astype(np.float32)}
+
+    return state, _regression_step(module), batch_fn
+
+
+def _layout(arr) -> dict:
+    """How a (global) array lies on the devices: spec, shard row ranges, whether each shard holds its rows."""
+    shards = sorted(arr.addressable_shards, key=lambda s: s.device.id)
+    return {
+        "shape": list(arr.shape),
+        "spec": str(arr.sharding.spec) if hasattr(arr.sharding, "spec") else None,
+        "num_devices": len(arr.sharding.device_set),
+        "num_shards": len(shards),
+        "shard_shapes": [list(s.data.shape) for s in shards],
+        "fully_replicated": bool(arr.sharding.is_fully_replicated),
+        "row_starts": [s.index[0].start if arr.ndim and s.index[0].start is not None else 0 for s in shards],
+    }
+
+
+def _flat(tree) -> dict:
+    return {jax.tree_util.keystr(p): np.asarray(jax.device_get(x)) for p, x in
+            jax.tree_util.tree_flatten_with_path(tree)[0]}
+
+
+def _error_of(fn):
+    from jaxgest.errors import JaxgestError
+
+    try:
+        fn()
+    except JaxgestError as e:
+        return f"{type(e).__name__}: {e}"
+    return None
+
+
+def run_model(name: str, args, out: pathlib.Path) -> dict:
+    from jaxgest import parallel
+    from jaxgest.training import MetricsLogger, train_loop
+
+    mesh = parallel.make_mesh(args.devices)
+    state, step_fn, batch_fn = BUILDERS[name](args.seed, args.batch)
+    state = parallel.replicate(state, mesh)
+    step = parallel.parallelize_step(step_fn, mesh)
+    batches = parallel.sharded_batch_fn(batch_fn, mesh)
+    info = parallel.device_info(mesh)
+
+    first = batches(0)
+    host_first = batch_fn(0)
+    leaf = jax.tree_util.tree_leaves(first)[0]
+    host_leaf = jax.tree_util.tree_leaves(host_first)[0]
+    rows_match = all(np.array_equal(np.asarray(s.data), host_leaf[s.index]) for s in leaf.addressable_shards)
+    key = jax.random.PRNGKey(args.seed)
+    hlo = step.lower(state, first, key).compile().as_text()
+
+    losses = []
+    logger = MetricsLogger(out / name, extra=info)
+    final = train_loop(state, step, batches, key=key, num_steps=args.steps, logger=logger, log_every=1,
+                       progress=False, on_log=lambda i, m: losses.append(m["loss"]))
+    params = _flat(final.params)
+    np.savez(out / f"{name}.npz", **params)
+    param_leaves = jax.tree_util.tree_leaves(final.params)
+    return {
+        "device_info": info,
+        "losses": losses,
+        "batch_layout": _layout(leaf),
+        "batch_rows_match": bool(rows_match),
+        "param_layouts": [_layout(x) for x in param_leaves],
+        "step_layout": _layout(final.step),
+        "all_reduce_in_hlo": "all-reduce" in hlo,
+        "metrics_lines": (out / name / "metrics.jsonl").read_text().splitlines(),
+    }
+
+
+def error_checks(args) -> dict:
+    """Messages of the errors a user can cause: too many / zero devices, a batch that does not divide."""
+    from jaxgest import parallel
+
+    mesh = parallel.make_mesh(args.devices)
+    odd = {"x": np.zeros((mesh.size + 2, 3), np.float32)} if mesh.size > 1 else None
+    return {
+        "too_many": _error_of(lambda: parallel.make_mesh(jax.device_count() + 1)),
+        "zero": _error_of(lambda: parallel.make_mesh(0)),
+        "indivisible": _error_of(lambda: parallel.shard_batch(odd, mesh)) if odd is not None else None,
+        "scalar": _error_of(lambda: parallel.shard_batch({"scale": np.float32(1.0)}, mesh)),
+    }
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser()
+    p.add_argument("--model", action="append", help="registered model (repeatable; default all)")
+    p.add_argument("--devices", type=int, default=None)
+    p.add_argument("--steps", type=int, default=3)
+    p.add_argument("--batch", type=int, default=8)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=pathlib.Path)
+    p.add_argument("--host-devices", type=int, help="fake CPU devices (sets XLA_FLAGS before importing jax)")
+    p.add_argument("--list", action="store_true", help="print the registered model names and exit")
+    args = p.parse_args(argv)
+    if args.list:
+        print(json.dumps(sorted(BUILDERS)))
+        return 0
+    from jaxgest.errors import JaxgestError
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    report = {"device_count": jax.device_count(), "errors": error_checks(args), "models": {}}
+    try:
+        for name in args.model or sorted(BUILDERS):
+            report["models"][name] = run_model(name, args, args.out)
+    except JaxgestError as e:
+        print(f"jaxgest: {e}", file=sys.stderr)
+        return 2
+    (args.out / "info.json").write_text(json.dumps(report, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -43,9 +43,29 @@ def _smooth_motion(seed, batch, frames, channels):
     return jnp.asarray(amp * np.sin(2 * np.pi * freq * t + phase), jnp.float32)
 
 
+def _random_like(shapes, seed=0):
+    """Random parameters with the structure of ``shapes`` (kernels ~ N(0, 1/fan_in), LN scales 1, biases 0).
+
+    Filled with NumPy: compiling Flax's initialisers costs seconds per model on this machine, and the
+    initialisers themselves are not under test here (their structure is, via ``jax.eval_shape``).
+    """
+    rng = np.random.default_rng(seed)
+
+    def fill(path, leaf):
+        name = jax.tree_util.keystr(path)
+        if "scale" in name:
+            return jnp.ones(leaf.shape, leaf.dtype)
+        if "bias" in name:
+            return jnp.zeros(leaf.shape, leaf.dtype)
+        fan_in = int(np.prod(leaf.shape[:-1])) if len(leaf.shape) > 1 else 1
+        return jnp.asarray(rng.normal(size=leaf.shape) / np.sqrt(fan_in), leaf.dtype)
+
+    return jax.tree_util.tree_map_with_path(fill, shapes)
+
+
 @pytest.fixture(scope="module")
 def params():
-    return jax.jit(init_params, static_argnums=0)(CFG, jax.random.PRNGKey(0))
+    return _random_like(jax.eval_shape(lambda k: init_params(CFG, k), jax.random.PRNGKey(0)))
 
 
 def _count(tree):
@@ -151,7 +171,7 @@ def encoders():
     for impl in ("blockwise", "dense"):
         tcfg = dataclasses.replace(TINY.transformer, omega=3, block_size=4, attention_impl=impl)
         enc = StyleTransformerEncoder(tcfg)
-        variables = variables or enc.init(jax.random.PRNGKey(1), tok)
+        variables = variables or _random_like(jax.eval_shape(enc.init, jax.random.PRNGKey(1), tok), seed=1)
         out[impl] = jax.jit(lambda t, enc=enc: enc.apply(variables, t))
     return out, tok
 
@@ -179,12 +199,20 @@ def test_tokens_beyond_omega_have_no_influence(encoders, i, j, impl):
 
 def test_all_methods_run_with_right_shapes(params):
     content, style = _smooth_motion(1, 2, 50, 39), _smooth_motion(2, 2, 70, 39)
-    for method in ("soft", "hard", "adain", "avatarnet"):
-        up, lo, aux = jax.jit(transfer_arrays, static_argnames=("cfg", "method"))(
-            params, content, style, cfg=CFG, method=method)
+    methods = ("soft", "hard", "adain", "avatarnet")
+
+    @jax.jit  # one compilation for the four methods
+    def run_all(params, content, style):
+        return {m: transfer_arrays(params, content, style, cfg=CFG, method=m) for m in methods}
+
+    results = run_all(params, content, style)
+    for method, (up, lo, aux) in results.items():
         assert up.shape == (2, 50, 39) and lo.shape == (2, 50, 24), method
         assert bool(jnp.isfinite(up).all() & jnp.isfinite(lo).all()), method
-    assert aux["content_latents"].shape == (2, 16, 16)  # 50 frames -> padded 64 -> 16 latent frames
+        assert aux["content_latents"].shape == (2, 16, 16)  # 50 frames -> padded 64 -> 16 latent frames
+    assert not np.allclose(np.asarray(results["soft"][0]), np.asarray(results["adain"][0]))
+    with pytest.raises(ValueError, match="unknown transfer method"):
+        transfer_arrays(params, content, style, cfg=CFG, method="magic")
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ from jaxgest.tgst.config import AutoencoderConfig
 
 
 def _pytorch_padding(kernel: int) -> tuple[tuple[int, int]]:
-    """``padding=kernel // 2`` on both sides, as ``torch.nn.Conv1d(padding=k // 2)`` (ceil(F / stride) out)."""
+    """``padding=k // 2`` on both sides, like ``torch.nn.Conv1d(padding=k // 2)``: ceil(F / stride) out."""
     return ((kernel // 2, kernel // 2),)
 
 
@@ -42,7 +42,7 @@ def upsample_linear(x: jax.Array, factor: int) -> jax.Array:
 
 
 class _ConvStack(nn.Module):
-    """Conv1d layers with optional x2 linear upsampling before each and GELU after all but (optionally) the last."""
+    """Conv1d layers, optional linear upsampling before each, GELU after each (optionally not the last)."""
 
     features: tuple[int, ...]
     kernels: tuple[int, ...]
@@ -55,14 +55,15 @@ class _ConvStack(nn.Module):
         n = len(self.features)
         for i, (feat, k, s, up) in enumerate(zip(self.features, self.kernels, self.strides, self.upsample)):
             x = upsample_linear(x, up)
-            x = nn.Conv(feat, kernel_size=(k,), strides=(s,), padding=_pytorch_padding(k), name=f"conv_{i}")(x)
+            pad = _pytorch_padding(k)
+            x = nn.Conv(feat, kernel_size=(k,), strides=(s,), padding=pad, name=f"conv_{i}")(x)
             if i < n - 1 or self.final_activation:
                 x = nn.gelu(x, approximate=False)
         return x
 
 
 class MotionAutoencoder(nn.Module):
-    """Encoder 39 -> 64 -> 32 -> 16 (strides 1, 2, 2) and two decoders 16 -> 32 -> 64 -> 39, 16 -> 16 -> 32 -> 24.
+    """Encoder 39 -> 64 -> 32 -> 16 (strides 1, 2, 2); decoders 16 -> 32 -> 64 -> 39 and 16 -> 16 -> 32 -> 24.
 
     ``encode``: ``(batch, F, 39) -> (batch, ceil(F / 4), 16)``; ``decode_upper`` / ``decode_lower``:
     ``(batch, T, 16) -> (batch, 4T, 39 | 24)``. 23,743 parameters with the paper preset. The decoders'

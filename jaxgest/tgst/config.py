@@ -1,4 +1,4 @@
-"""Configuration of tokenized gesture style transfer (Kuriyama et al. 2022): autoencoder, transformer, training.
+"""Configuration of tokenized gesture style transfer (Kuriyama et al. 2022): models and training.
 
 Presets (``get_config(name)``):
 
@@ -59,9 +59,9 @@ class TransformerConfig:
 
     token_dim: int = 64  # d_g = w * d_z
     omega: int = 20  # band half-width of the encoder self-attention mask (in tokens)
-    variant: str = "paper"  # "paper" (text: pre-LN, |i-j| <= omega) or "authors" (public code, see module doc)
+    variant: str = "paper"  # "paper" (pre-LN, |i-j| <= omega) or "authors" (public code; see transformer.py)
     layernorms_per_block: int = 1  # 1 = one LN shared by both residuals (50,240 params); 2 = two (50,496)
-    attention_impl: str = "blockwise"  # "blockwise" O(N * omega) banded attention, or "dense" masked reference
+    attention_impl: str = "blockwise"  # "blockwise": O(N * omega) banded attention; "dense": masked reference
     block_size: int = 32  # query block length of the blockwise attention; must be >= omega
     max_authors_pe: int = 150  # authors' variant: length of the positional table (indexed by batch, a bug)
 
@@ -98,7 +98,8 @@ class TGSTConfig:
         if t.variant not in VARIANTS:
             raise ValueError(f"transformer.variant must be one of {VARIANTS}, got {t.variant!r}")
         if t.attention_impl not in ATTENTION_IMPLS:
-            raise ValueError(f"transformer.attention_impl must be one of {ATTENTION_IMPLS}, got {t.attention_impl!r}")
+            raise ValueError(
+                f"transformer.attention_impl must be one of {ATTENTION_IMPLS}, got {t.attention_impl!r}")
         if t.layernorms_per_block not in (1, 2):
             raise ValueError(f"transformer.layernorms_per_block must be 1 or 2, got {t.layernorms_per_block}")
         if t.block_size < max(t.omega, 1):

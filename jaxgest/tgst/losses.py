@@ -83,12 +83,13 @@ def appearance_loss(style_cls: jax.Array, transferred_cls: jax.Array) -> jax.Arr
     return _safe_norm(style_cls - transferred_cls)
 
 
-def total_transformer_loss(identity: jax.Array, cyclic: jax.Array, structure: jax.Array, appearance: jax.Array,
+def total_transformer_loss(identity: jax.Array, cyclic: jax.Array, structure: jax.Array,
+                           appearance: jax.Array,
                            *, lambda_identity: float = 1.0, lambda_cyclic: float = 1.0,
                            lambda_structure: float = 1.0, lambda_appearance: float = 1.0,
                            use_identity: bool = True, use_cyclic: bool = True, use_structure: bool = True,
                            use_appearance: bool = True) -> jax.Array:
-    """L = L_identity + lambda_c L_cyclic + lambda_s L_structure + lambda_a L_appearance (same shape as terms).
+    """L = L_identity + lambda_c L_cyclic + lambda_s L_structure + lambda_a L_appearance (shape of the terms).
 
     Each term has a weight (identity's is 1 in the paper) and a switch (ablation, Table 4); a switched-off
     term contributes exactly nothing (not even a NaN).

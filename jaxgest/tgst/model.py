@@ -125,7 +125,7 @@ def transformer_loss_terms(tr_params: Params, content_tokens: jax.Array, style_t
 
 def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array, *, cfg: TGSTConfig,
                      method: str = "soft", content_valid: int | None = None, style_valid: int | None = None):
-    """Style-transfer latents ``(batch, Tc, 16)`` with ``(batch, Ts, 16)`` -> (latents ``(batch, Tc, 16)``, aux).
+    """Transfer latents ``(batch, Tc, 16)`` to the style of ``(batch, Ts, 16)``: (``(batch, Tc, 16)``, aux).
 
     method: ``"soft"`` (eq. 4), ``"hard"`` (eq. 19), ``"adain"`` (eq. 17) or ``"avatarnet"`` (eq. 18).
     ``*_valid``: latent frames of the real clips (statistics of the baselines ignore the padding).
@@ -136,7 +136,8 @@ def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array
         tokens, aux = transfer_tokens(tr_params, c_tok, s_tok, cfg=cfg, hard=(method == "hard"))
         return detokenize(tokens, content_z.shape[1], w, h), aux
     if method == "adain":
-        return baselines.adain_latents(content_z, style_z, content_valid=content_valid, style_valid=style_valid), {}
+        z = baselines.adain_latents(content_z, style_z, content_valid=content_valid, style_valid=style_valid)
+        return z, {}
     if method == "avatarnet":
         return baselines.avatarnet_swap(content_z, style_z, w=w, h=h, content_valid=content_valid,
                                         style_valid=style_valid), {}

@@ -39,7 +39,8 @@ def create_ae_state(cfg: TGSTConfig, ae_params: Params, tx: optax.GradientTransf
     return TrainState.create(apply_fn=autoencoder_module(cfg).apply, params=ae_params, tx=tx)
 
 
-def create_transformer_state(cfg: TGSTConfig, tr_params: Params, tx: optax.GradientTransformation) -> TrainState:
+def create_transformer_state(cfg: TGSTConfig, tr_params: Params,
+                             tx: optax.GradientTransformation) -> TrainState:
     """TrainState of the style transformer (``apply_fn`` = ``StyleTransformer.apply``)."""
     return TrainState.create(apply_fn=transformer_module(cfg).apply, params=tr_params, tx=tx)
 
@@ -102,7 +103,8 @@ def make_transformer_train_step(cfg: TGSTConfig, tx: optax.GradientTransformatio
         return jax.lax.stop_gradient(tokenize(z, w, h))
 
     def loss_fn(params, batch):
-        terms = transformer_loss_terms(params, tokens_of(batch["content"]), tokens_of(batch["style"]), cfg=cfg)
+        content, style = tokens_of(batch["content"]), tokens_of(batch["style"])
+        terms = transformer_loss_terms(params, content, style, cfg=cfg)
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
         return metrics["loss"], metrics
 

@@ -24,7 +24,8 @@ def swap_logits(decoded_content: jax.Array, encoded_style: jax.Array) -> jax.Arr
     return jnp.einsum("bnd,bmd->bnm", decoded_content, encoded_style[:, 1:])
 
 
-def soft_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, temperature: float = 1.0) -> jax.Array:
+def soft_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array,
+                      temperature: float = 1.0) -> jax.Array:
     """W = softmax_m(g~c_n . T_E(g^s)_m / temperature) over style tokens (CLS excluded); ``(batch, Nc, Ns)``.
 
     temperature = 1 is eq. 4; temperature -> 0 tends to the hard swap of eq. 19.

@@ -23,7 +23,7 @@ class ClipTooShortError(DataError, ValueError):
 
 
 def check_clip_length(frames: int, *, min_frames: int = 16, what: str = "clip") -> None:
-    """Raise :class:`ClipTooShortError` when ``frames < min_frames`` (shapes are static: call at trace time)."""
+    """Raise :class:`ClipTooShortError` if ``frames < min_frames`` (static shapes: checked at trace time)."""
     if frames < min_frames:
         raise ClipTooShortError(
             f"{what} has {frames} frames; TGST needs at least {min_frames} frames (one gesture token)"
@@ -60,7 +60,7 @@ def num_tokens(latent_frames: int, *, w: int = 4, h: int = 2) -> int:
 
 
 def tokenize(z: jax.Array, w: int = 4, h: int = 2) -> jax.Array:
-    """Latents ``(batch, T, d_z)`` -> gesture tokens ``(batch, N, w * d_z)``, g_n = z_{nh} ⊕ ... ⊕ z_{nh+w-1}.
+    """Latents ``(batch, T, d_z)`` -> tokens ``(batch, N, w * d_z)``, g_n = z_{nh} ⊕ ... ⊕ z_{nh+w-1}.
 
     The end is padded (edge values) to a multiple of h so the last frames are covered; N = T'/h - 1.
     Needs w = 2h (half overlap) and T >= w.

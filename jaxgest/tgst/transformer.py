@@ -41,7 +41,7 @@ _MASKED = -1e9  # finite, so rows with every key masked (padding) stay NaN-free
 
 
 def sinusoidal_positions(num: int, dim: int, *, angle_scale: float = 1.0) -> np.ndarray:
-    """Positional table ``(num, dim)``: pe[p, 2i] = sin(s p f_i), pe[p, 2i+1] = cos(s p f_i), f_i = 10000^(-2i/dim).
+    """Positions ``(num, dim)``: pe[p, 2i] = sin(s p f_i), pe[p, 2i+1] = cos(s p f_i), f_i = 10000^(-2i/dim).
 
     ``angle_scale`` s is 1 for Vaswani et al.; the authors' code uses 2*pi.
     References: Kuriyama et al. 2022, eq. 2; Vaswani et al. 2017, §3.5.

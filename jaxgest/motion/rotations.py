@@ -88,7 +88,7 @@ def quat_inv(q):
     """Inverse of unit quaternions (the conjugate)."""
     xp = _xp(q)
     q = _asarray(xp, q)
-    return q * xp.asarray([1.0, -1.0, -1.0, -1.0], dtype=q.dtype)
+    return xp.concatenate([q[..., :1], -q[..., 1:]], axis=-1)
 
 
 def quat_rotate(q, v):

@@ -23,12 +23,16 @@ Use from the model training code (``state`` a ``TrainState``, ``step_fn`` the *u
 Global batch. The batch size of a config is the GLOBAL batch: one optimizer step averages the loss over
 that many examples whatever the number of devices, so a run on N devices follows the 1-device run. Each
 device holds ``batch / N`` examples (the batch must be divisible by N, otherwise :func:`shard_batch` raises
-a :class:`~jaxgest.errors.JaxgestError` naming the array). With several hosts, each host loads only
-``batch / num_hosts`` examples: ``batch_fn`` draws the global batch's example indices from ``(seed, i)``
-exactly as on one host, keeps its own contiguous block with :func:`host_shard`, loads those, and
-:func:`shard_batch` assembles the global array (``jax.make_array_from_process_local_data``). Every host
-therefore computes the same global batch as a single-host run, and the trained parameters do not depend on
-the number of hosts.
+a :class:`~jaxgest.errors.JaxgestError` naming the array). With several hosts, each host holds only
+``batch / num_hosts`` examples on its devices. Two ways to feed it: (a) ``batch_fn`` returns the global
+batch on every host (cheap for in-memory or generated data) and :func:`shard_batch` keeps this host's block;
+(b) to *read* only its own share, ``batch_fn`` draws the global batch's example indices from ``(seed, i)``
+exactly as on one host, keeps its contiguous block with :func:`host_shard`, loads only those, and
+``sharded_batch_fn(batch_fn, mesh, host_local=True)`` assembles the global array
+(:func:`host_local_batch_to_global`, ``jax.make_array_from_process_local_data``). Either way every host
+trains on the same global batch as a single-host run, so the parameters do not depend on the number of
+hosts. Only process 0 (``jax.process_index() == 0``) should write metrics.jsonl/config.json; every process
+must call ``Checkpointer.save`` (orbax coordinates the hosts).
 
 Several hosts. Start the same command on every host with, for example::
 
@@ -144,7 +148,8 @@ def make_mesh(num_devices: Optional[int] = None) -> Mesh:
     if num_devices < 1:
         raise JaxgestError(f"--devices {num_devices}: need at least 1 device")
     if num_devices > available:
-        raise JaxgestError(f"--devices {num_devices}: only {available} {devices[0].platform} device(s) available")
+        platform = devices[0].platform
+        raise JaxgestError(f"--devices {num_devices}: only {available} {platform} device(s) available")
     if multi and num_devices != available:
         raise JaxgestError(f"--devices {num_devices}: a {jax.process_count()}-process run uses all "
                            f"{available} devices; omit --devices")
@@ -168,23 +173,25 @@ def _check_divisible(batch, parts: int, what: str) -> None:
         name = jax.tree_util.keystr(path) or "<batch>"
         shape = np.shape(leaf)
         if len(shape) == 0:
-            raise JaxgestError(f"batch array {name} is a scalar; every batch array needs a leading batch axis")
+            raise JaxgestError(f"batch array {name} is a scalar; every batch array needs a leading batch "
+                               "axis")
         if shape[0] % parts:
             raise JaxgestError(f"batch array {name} has {shape[0]} examples, not divisible by the {parts} "
                                f"{what}; choose a batch size that is a multiple of {parts}")
 
 
 def shard_batch(batch: Any, mesh: Mesh) -> Any:
-    """Place a batch pytree on the mesh with its leading axis split over ``"data"``.
+    """Place the GLOBAL batch pytree on the mesh with its leading axis split over ``"data"``.
 
-    Single process: ``batch`` is the global batch (leaves ``(batch, ...)``), each device gets ``batch/N``
-    rows in order. Several processes: ``batch`` is this host's block (from :func:`host_shard`) and the
-    global array is assembled with :func:`host_local_batch_to_global`.
+    Every leaf is ``(batch, ...)``; device ``k`` of ``N`` gets rows ``[k*batch/N, (k+1)*batch/N)``. With
+    several processes every host passes the same global batch and keeps only its own block
+    (:func:`host_shard`, then :func:`host_local_batch_to_global`); a pipeline that loads only its block
+    calls :func:`host_local_batch_to_global` directly.
     Raises JaxgestError naming the array when its leading size does not divide over the devices.
     """
-    if jax.process_count() > 1:
-        return host_local_batch_to_global(batch, mesh)
     _check_divisible(batch, mesh.size, "devices")
+    if jax.process_count() > 1:
+        return host_local_batch_to_global(jax.tree_util.tree_map(host_shard, batch), mesh)
     return jax.device_put(batch, data_sharding(mesh))
 
 
@@ -229,11 +236,17 @@ def host_shard(x, process_index: Optional[int] = None, process_count: Optional[i
     return x[process_index * per:(process_index + 1) * per]
 
 
-def sharded_batch_fn(batch_fn: Callable[[int], Any], mesh: Mesh) -> Callable[[int], Any]:
-    """``i -> shard_batch(batch_fn(i), mesh)`` for :func:`jaxgest.training.train_loop`."""
+def sharded_batch_fn(batch_fn: Callable[[int], Any], mesh: Mesh, *,
+                     host_local: bool = False) -> Callable[[int], Any]:
+    """``i -> `` the batch of step ``i`` on the mesh, for :func:`jaxgest.training.train_loop`.
+
+    ``batch_fn(i)`` returns the global batch (default; :func:`shard_batch`) or, with ``host_local=True``,
+    only this host's block of it (:func:`host_local_batch_to_global`; same as the default on one host).
+    """
+    place = host_local_batch_to_global if host_local else shard_batch
 
     def fn(i: int):
-        return shard_batch(batch_fn(i), mesh)
+        return place(batch_fn(i), mesh)
 
     return fn
 

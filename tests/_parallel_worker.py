@@ -5,7 +5,7 @@ in a process whose ``XLA_FLAGS`` holds ``--xla_force_host_platform_device_count=
 before this interpreter imports jax; ``--host-devices`` sets it here otherwise). For every model it runs
 ``K`` steps of :func:`jaxgest.training.train_loop` through :mod:`jaxgest.parallel` and writes
 
-* ``DIR/<model>.npz``: the final parameters, keyed by their pytree path;
+* ``DIR/<model>.npz``: the final parameters, keyed by their pytree path (``<model>_init.npz``: initial);
 * ``DIR/<model>/metrics.jsonl``: the MetricsLogger output with the device info as extra fields;
 * ``DIR/info.json``: per model the losses, how the first batch and the final parameters are laid out over
   the devices, whether the compiled step all-reduces, and the errors of bad device/batch requests.
@@ -28,8 +28,8 @@ import pathlib
 import sys
 
 if __name__ == "__main__" and "--host-devices" in sys.argv:  # before jax is imported
-    _n = sys.argv[sys.argv.index("--host-devices") + 1]
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={_n}")
+    _flag = "--xla_force_host_platform_device_count=" + sys.argv[sys.argv.index("--host-devices") + 1]
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}"
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
@@ -64,6 +64,17 @@ def _regression_step(module):
     return step
 
 
+def _init_state(module, tx, seed: int, example):
+    """TrainState from ``seed``, initialised inside one jit (eager flax init compiles every op apart)."""
+    from jaxgest.training import TrainState
+
+    def create(key):
+        params = module.init(key, example)["params"]
+        return TrainState.create(apply_fn=module.apply, params=params, tx=tx)
+
+    return jax.jit(create)(jax.random.PRNGKey(seed))
+
+
 def _global_norm(tree):
     return jnp.sqrt(sum(jnp.sum(x**2) for x in jax.tree_util.tree_leaves(tree)))
 
@@ -74,16 +85,13 @@ def build_toy_mlp(seed: int, batch_size: int):
     import flax.linen as nn
     import optax
 
-    from jaxgest.training import TrainState
-
     class MLP(nn.Module):
         @nn.compact
         def __call__(self, x):
             return nn.Dense(4)(nn.gelu(nn.Dense(32)(x)))
 
     module = MLP()
-    params = module.init(jax.random.PRNGKey(seed), jnp.zeros((1, 8), jnp.float32))["params"]
-    state = TrainState.create(apply_fn=module.apply, params=params, tx=optax.adam(1e-2))
+    state = _init_state(module, optax.adam(1e-2), seed, jnp.zeros((1, 8), jnp.float32))
     w = np.random.default_rng(seed + 1000).normal(size=(8, 4)).astype(np.float32)
 
     def batch_fn(i):
@@ -100,8 +108,6 @@ def build_toy_conv1d(seed: int, batch_size: int):
     import flax.linen as nn
     import optax
 
-    from jaxgest.training import TrainState
-
     class Conv(nn.Module):
         @nn.compact
         def __call__(self, x):
@@ -110,8 +116,7 @@ def build_toy_conv1d(seed: int, batch_size: int):
             return nn.Conv(3, (3,))(h)
 
     module = Conv()
-    params = module.init(jax.random.PRNGKey(seed), jnp.zeros((1, 16, 6), jnp.float32))["params"]
-    state = TrainState.create(apply_fn=module.apply, params=params, tx=optax.adam(1e-2))
+    state = _init_state(module, optax.adam(1e-2), seed, jnp.zeros((1, 16, 6), jnp.float32))
 
     def batch_fn(i):
         rng = np.random.default_rng([seed, i])
@@ -157,9 +162,16 @@ def run_model(name: str, args, out: pathlib.Path) -> dict:
 
     mesh = parallel.make_mesh(args.devices)
     state, step_fn, batch_fn = BUILDERS[name](args.seed, args.batch)
+    np.savez(out / f"{name}_init.npz", **_flat(state.params))
     state = parallel.replicate(state, mesh)
     step = parallel.parallelize_step(step_fn, mesh)
-    batches = parallel.sharded_batch_fn(batch_fn, mesh)
+    if args.host_local:  # each host reads only its block of the global batch
+        def local_fn(i):
+            return jax.tree_util.tree_map(parallel.host_shard, batch_fn(i))
+
+        batches = parallel.sharded_batch_fn(local_fn, mesh, host_local=True)
+    else:
+        batches = parallel.sharded_batch_fn(batch_fn, mesh)
     info = parallel.device_info(mesh)
 
     first = batches(0)
@@ -167,12 +179,24 @@ def run_model(name: str, args, out: pathlib.Path) -> dict:
     leaf = jax.tree_util.tree_leaves(first)[0]
     host_leaf = jax.tree_util.tree_leaves(host_first)[0]
     rows_match = all(np.array_equal(np.asarray(s.data), host_leaf[s.index]) for s in leaf.addressable_shards)
+    if args.host_local:  # the other way of placing the same batch must give the same shards
+        other = parallel.shard_batch(host_first, mesh)
+    else:
+        local = jax.tree_util.tree_map(parallel.host_shard, host_first)
+        other = parallel.host_local_batch_to_global(local, mesh)
+    paths_agree = all(
+        a.index == b.index and np.array_equal(np.asarray(a.data), np.asarray(b.data))
+        for x, y in zip(jax.tree_util.tree_leaves(first), jax.tree_util.tree_leaves(other))
+        for a, b in zip(sorted(x.addressable_shards, key=lambda s: s.device.id),
+                        sorted(y.addressable_shards, key=lambda s: s.device.id)))
     key = jax.random.PRNGKey(args.seed)
-    hlo = step.lower(state, first, key).compile().as_text()
+    # Compile once, ahead of time, and train with that executable (same program as calling ``step``).
+    compiled = step.lower(state, first, key).compile()
+    hlo = compiled.as_text()
 
     losses = []
     logger = MetricsLogger(out / name, extra=info)
-    final = train_loop(state, step, batches, key=key, num_steps=args.steps, logger=logger, log_every=1,
+    final = train_loop(state, compiled, batches, key=key, num_steps=args.steps, logger=logger, log_every=1,
                        progress=False, on_log=lambda i, m: losses.append(m["loss"]))
     params = _flat(final.params)
     np.savez(out / f"{name}.npz", **params)
@@ -182,6 +206,7 @@ def run_model(name: str, args, out: pathlib.Path) -> dict:
         "losses": losses,
         "batch_layout": _layout(leaf),
         "batch_rows_match": bool(rows_match),
+        "global_and_host_local_paths_agree": bool(paths_agree),
         "param_layouts": [_layout(x) for x in param_leaves],
         "step_layout": _layout(final.step),
         "all_reduce_in_hlo": "all-reduce" in hlo,
@@ -200,6 +225,7 @@ def error_checks(args) -> dict:
         "zero": _error_of(lambda: parallel.make_mesh(0)),
         "indivisible": _error_of(lambda: parallel.shard_batch(odd, mesh)) if odd is not None else None,
         "scalar": _error_of(lambda: parallel.shard_batch({"scale": np.float32(1.0)}, mesh)),
+        "partial_mesh": _error_of(lambda: parallel.make_mesh(1)) if jax.process_count() > 1 else None,
     }
 
 
@@ -212,22 +238,27 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=pathlib.Path)
     p.add_argument("--host-devices", type=int, help="fake CPU devices (sets XLA_FLAGS before importing jax)")
+    p.add_argument("--host-local", action="store_true", help="each host builds only its block of the batch")
     p.add_argument("--list", action="store_true", help="print the registered model names and exit")
     args = p.parse_args(argv)
     if args.list:
         print(json.dumps(sorted(BUILDERS)))
         return 0
+    from jaxgest import parallel
     from jaxgest.errors import JaxgestError
 
-    args.out.mkdir(parents=True, exist_ok=True)
-    report = {"device_count": jax.device_count(), "errors": error_checks(args), "models": {}}
     try:
+        parallel.maybe_initialize_distributed()  # multi-process when JAX_COORDINATOR_ADDRESS is set
+        out = args.out if jax.process_count() == 1 else args.out / f"proc{jax.process_index()}"
+        out.mkdir(parents=True, exist_ok=True)
+        report = {"device_count": jax.device_count(), "local_device_count": jax.local_device_count(),
+                  "process_index": jax.process_index(), "errors": error_checks(args), "models": {}}
         for name in args.model or sorted(BUILDERS):
-            report["models"][name] = run_model(name, args, args.out)
+            report["models"][name] = run_model(name, args, out)
     except JaxgestError as e:
         print(f"jaxgest: {e}", file=sys.stderr)
         return 2
-    (args.out / "info.json").write_text(json.dumps(report, indent=1))
+    (out / "info.json").write_text(json.dumps(report, indent=1))
     return 0
 
 

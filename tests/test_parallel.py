@@ -1,0 +1,261 @@
+"""Data-parallel training (jaxgest.parallel): 4 devices train to the parameters of 1 device.
+
+The multi-device runs happen in subprocesses (tests/_parallel_worker.py) whose ``XLA_FLAGS`` give 4 fake
+CPU devices before jax is imported: one run on 1 device, one on 4 devices, and one on 2 processes x 2
+devices joined by ``jax.distributed`` (``JAX_COORDINATOR_ADDRESS`` on localhost), each host reading only
+its block of the batch. All start at once and are shared by the tests of this module (marked slow: the
+subprocesses take ~20 s of compile time together on 2 cores). Every model in the
+worker's registry is checked; the in-process tests cover the single-device API and its errors.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import pathlib
+import socket
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxgest import parallel
+from jaxgest.errors import JaxgestError
+from jaxgest.training import TrainState
+
+WORKER = pathlib.Path(__file__).with_name("_parallel_worker.py")
+_spec = importlib.util.spec_from_file_location("_parallel_worker", WORKER)
+worker = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(worker)
+MODELS = sorted(worker.BUILDERS)
+STEPS, BATCH, SEED = 4, 8, 3
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+def _env(host_devices: int, **extra) -> dict:
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
+    env.update(XLA_FLAGS=f"--xla_force_host_platform_device_count={host_devices}", JAX_PLATFORMS="cpu",
+               PYTHONPATH=str(WORKER.parents[1]), **extra)
+    return env
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Start every worker at once (they are mostly compile time) and wait; returns the output folders."""
+    root = tmp_path_factory.mktemp("parallel")
+    common = [sys.executable, str(WORKER), "--steps", str(STEPS), "--batch", str(BATCH), "--seed", str(SEED)]
+    port = _free_port()
+    jobs = {
+        "one": (common + ["--devices", "1", "--out", str(root / "one")], _env(4)),
+        "four": (common + ["--devices", "4", "--out", str(root / "four")], _env(4)),
+    }
+    for p in range(2):
+        jobs[f"host{p}"] = (
+            common + ["--host-local", "--out", str(root / "hosts")],
+            _env(2, JAX_COORDINATOR_ADDRESS=f"localhost:{port}", JAX_NUM_PROCESSES="2",
+                 JAX_PROCESS_ID=str(p)),
+        )
+    procs = {k: subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for k, (cmd, env) in jobs.items()}
+    failed = []
+    for k, proc in procs.items():
+        try:
+            _, err = proc.communicate(timeout=300)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _, err = proc.communicate()
+        if proc.returncode != 0:
+            failed.append(f"{k}: exit {proc.returncode}\n{err[-3000:]}")
+    if failed:
+        pytest.fail("parallel worker failed:\n" + "\n".join(failed))
+    return {"one": root / "one", "four": root / "four", "host0": root / "hosts" / "proc0",
+            "host1": root / "hosts" / "proc1"}
+
+
+def _info(folder: pathlib.Path) -> dict:
+    return json.loads((folder / "info.json").read_text())
+
+
+def _assert_same_params(a: pathlib.Path, b: pathlib.Path) -> None:
+    pa, pb = np.load(a), np.load(b)
+    assert sorted(pa.files) == sorted(pb.files)
+    for k in pa.files:
+        np.testing.assert_allclose(pb[k], pa[k], rtol=1e-5, atol=1e-6, err_msg=k)
+
+
+@pytest.mark.slow
+def test_every_registered_model_is_run(runs):
+    assert MODELS and {"toy_mlp", "toy_conv1d"} <= set(MODELS)
+    for run in runs.values():
+        assert sorted(_info(run)["models"]) == MODELS
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", MODELS)
+def test_four_devices_train_like_one(runs, model):
+    _assert_same_params(runs["one"] / f"{model}.npz", runs["four"] / f"{model}.npz")
+    one, four = _info(runs["one"])["models"][model], _info(runs["four"])["models"][model]
+    # The loss is the mean over the GLOBAL batch on both: same numbers, not a per-device mean.
+    np.testing.assert_allclose(four["losses"], one["losses"], rtol=1e-5)
+    assert len(one["losses"]) == STEPS
+    # And training moved the parameters (the comparison is not between two initialisations).
+    start, trained = np.load(runs["one"] / f"{model}_init.npz"), np.load(runs["one"] / f"{model}.npz")
+    assert max(float(np.max(np.abs(trained[k] - start[k]))) for k in start.files) > 1e-3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", MODELS)
+def test_batch_is_split_and_state_replicated(runs, model):
+    info = _info(runs["four"])
+    assert info["device_count"] == 4
+    m = info["models"][model]
+    assert m["device_info"] == {"devices": 4, "platform": "cpu", "processes": 1}
+    batch = m["batch_layout"]
+    assert batch["spec"] == "P('data',)" and batch["num_devices"] == 4 and batch["num_shards"] == 4
+    assert not batch["fully_replicated"]
+    per = BATCH // 4
+    assert [s[0] for s in batch["shard_shapes"]] == [per] * 4
+    assert batch["row_starts"] == [0, per, 2 * per, 3 * per]
+    assert m["batch_rows_match"] and m["global_and_host_local_paths_agree"]
+    for layout in m["param_layouts"] + [m["step_layout"]]:
+        assert layout["fully_replicated"] and layout["num_devices"] == 4 and layout["num_shards"] == 4
+    assert m["all_reduce_in_hlo"]  # the gradient mean crosses devices inside the compiled step
+    single = _info(runs["one"])["models"][model]
+    assert single["device_info"]["devices"] == 1 and not single["all_reduce_in_hlo"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", MODELS)
+def test_metrics_jsonl_records_device_count(runs, model):
+    for run, devices in (("one", 1), ("four", 4)):
+        lines = [json.loads(x) for x in _info(runs[run])["models"][model]["metrics_lines"]]
+        assert [r["step"] for r in lines] == list(range(1, STEPS + 1))
+        assert all(r["devices"] == devices and r["processes"] == 1 for r in lines)
+
+
+@pytest.mark.slow
+def test_errors_name_the_problem(runs):
+    errors = _info(runs["four"])["errors"]
+    assert "batch array ['x'] has 6 examples, not divisible by the 4 devices" in errors["indivisible"]
+    assert "--devices 5: only 4 cpu device(s) available" in errors["too_many"]
+    assert "--devices 0" in errors["zero"]
+    assert "['scale'] is a scalar" in errors["scalar"]
+    assert all(e.startswith("JaxgestError") for e in errors.values() if e)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", MODELS)
+def test_two_hosts_train_like_one_device(runs, model):
+    for p in range(2):
+        info = _info(runs[f"host{p}"])
+        assert (info["process_index"], info["device_count"], info["local_device_count"]) == (p, 4, 2)
+        m = info["models"][model]
+        assert m["device_info"] == {"devices": 4, "platform": "cpu", "processes": 2}
+        _assert_same_params(runs["one"] / f"{model}.npz", runs[f"host{p}"] / f"{model}.npz")
+        # Host p holds only its contiguous block of the global batch.
+        per = BATCH // 4
+        assert m["batch_layout"]["shape"][0] == BATCH and m["batch_layout"]["num_shards"] == 2
+        assert m["batch_layout"]["row_starts"] == [2 * p * per, (2 * p + 1) * per]
+        assert m["batch_rows_match"] and m["global_and_host_local_paths_agree"]
+        assert all(x["fully_replicated"] and x["num_devices"] == 4 for x in m["param_layouts"])
+        assert "a 2-process run uses all 4 devices" in info["errors"]["partial_mesh"]
+
+
+# ----- in-process (one CPU device) ------------------------------------------------------------------------
+
+def test_make_mesh_and_device_info():
+    mesh = parallel.make_mesh()
+    assert mesh.axis_names == ("data",) and mesh.size == jax.device_count()
+    assert parallel.device_info(parallel.make_mesh(1)) == {
+        "devices": 1, "platform": jax.devices()[0].platform, "processes": 1}
+    with pytest.raises(JaxgestError, match=rf"--devices {jax.device_count() + 1}: only"):
+        parallel.make_mesh(jax.device_count() + 1)
+    with pytest.raises(JaxgestError, match="--devices -1"):
+        parallel.make_mesh(-1)
+
+
+def _linear_problem():
+    params = {"w": jnp.zeros((3,), jnp.float32), "b": jnp.zeros((), jnp.float32)}
+    state = TrainState.create(apply_fn=None, params=params, tx=optax.sgd(0.1))
+
+    def step_fn(state, batch, key):
+        def loss_fn(p):
+            noise = 0.01 * jax.random.normal(jax.random.fold_in(key, state.step), batch["y"].shape)
+            return jnp.mean((batch["x"] @ p["w"] + p["b"] - batch["y"] - noise) ** 2)
+
+        loss, grads = jax.value_and_grad(loss_fn)(state.params)
+        return state.apply_gradients(grads=grads), {"loss": loss}
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(4, 3)).astype(np.float32)
+    return state, step_fn, {"x": x, "y": (x @ np.float32([1, -2, 0.5]) + 0.3).astype(np.float32)}
+
+
+def test_parallel_step_equals_plain_jit_on_one_device(key):
+    mesh = parallel.make_mesh(1)
+    state, step_fn, batch = _linear_problem()
+    expected, m_expected = jax.jit(step_fn)(state, batch, key)
+    step = parallel.parallelize_step(step_fn, mesh)
+    replicated_state = parallel.replicate(state, mesh)
+    got, m_got = step(replicated_state, parallel.shard_batch(batch, mesh), key)
+    np.testing.assert_allclose(got.params["w"], expected.params["w"], rtol=1e-6)
+    np.testing.assert_allclose(m_got["loss"], m_expected["loss"], rtol=1e-6)
+    assert int(got.step) == 1 and got.params["w"].sharding == parallel.replicated(mesh)
+    assert got.tx is state.tx  # static fields pass through the sharded jit untouched
+    assert replicated_state.params["w"].is_deleted()  # the state was donated
+
+
+@settings(max_examples=25, deadline=None)
+@given(hosts=st.integers(1, 5), per=st.integers(1, 4), width=st.integers(1, 3))
+def test_host_shards_are_contiguous_blocks_covering_the_batch(hosts, per, width):
+    x = np.arange(hosts * per * width).reshape(hosts * per, width)
+    blocks = [parallel.host_shard(x, p, hosts) for p in range(hosts)]
+    assert all(b.shape == (per, width) for b in blocks)
+    np.testing.assert_array_equal(np.concatenate(blocks), x)
+
+
+def test_host_shard_errors_and_single_process_default():
+    x = np.arange(6)
+    np.testing.assert_array_equal(parallel.host_shard(x), x)  # one process: everything
+    with pytest.raises(JaxgestError, match="6 examples does not divide over 4 hosts"):
+        parallel.host_shard(x, 0, 4)
+    with pytest.raises(JaxgestError, match="host 2 of 2"):
+        parallel.host_shard(x, 2, 2)
+
+
+def test_distributed_init_only_when_asked():
+    assert parallel.maybe_initialize_distributed(env={}) is False
+    cluster_only = {"SLURM_JOB_ID": "1", "SLURM_NTASKS": "2", "OMPI_COMM_WORLD_SIZE": "2"}
+    assert parallel.maybe_initialize_distributed(env=cluster_only) is False
+    assert not jax.distributed.is_initialized()
+    with pytest.raises(JaxgestError, match="JAX_NUM_PROCESSES='two' is not an integer"):
+        parallel.maybe_initialize_distributed(
+            env={"JAX_COORDINATOR_ADDRESS": "h:1", "JAX_NUM_PROCESSES": "two"})
+    with pytest.raises(JaxgestError, match=r"JAX_PROCESS_ID=2 must be in \[0, JAX_NUM_PROCESSES=2\)"):
+        parallel.maybe_initialize_distributed(
+            env={"JAX_COORDINATOR_ADDRESS": "h:1", "JAX_NUM_PROCESSES": "2", "JAX_PROCESS_ID": "2"})
+    assert not jax.distributed.is_initialized()
+
+
+def test_shard_batch_keeps_values_and_rejects_scalars():
+    mesh = parallel.make_mesh(1)
+    batch = {"a": np.arange(8, dtype=np.float32).reshape(4, 2), "b": np.ones((4,), np.int32)}
+    placed = parallel.shard_batch(batch, mesh)
+    assert placed["a"].sharding == parallel.data_sharding(mesh)
+    np.testing.assert_array_equal(np.asarray(placed["a"]), batch["a"])
+    local = parallel.host_local_batch_to_global(batch, mesh)
+    np.testing.assert_array_equal(np.asarray(local["b"]), batch["b"])
+    with pytest.raises(JaxgestError, match=r"batch array \['s'\] is a scalar"):
+        parallel.shard_batch({"s": jnp.float32(1.0)}, mesh)

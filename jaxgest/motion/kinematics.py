@@ -1,0 +1,294 @@
+"""Forward kinematics, mirroring, root-yaw removal/restoration, floor contact, velocities (SPEC §2).
+
+Motion-level functions take and return :class:`~jaxgest.motion.skeleton.Motion` and compute in NumPy
+float64 (exact file-level numbers). :func:`fk_positions` is the batched ``jax.numpy`` version for use
+inside jit (losses, features); its parent array is static.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgest.motion import rotations as R
+from jaxgest.motion.skeleton import Motion, Skeleton
+
+
+# ---------------------------------------------------------------------------------------------------
+# Forward kinematics
+
+
+def global_transforms(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations ``(F, J, 4)`` and positions ``(F, J, 3)`` of every joint, file order, file units.
+
+    ``G_j = G_parent(j) * q_j`` and ``p_j = p_parent(j) + G_parent(j) t_j`` where ``t_j`` is the joint's
+    local translation (position channels or rest offset).
+    """
+    parents = motion.skeleton.parents
+    F, J = motion.rotations.shape[:2]
+    grot = np.empty((F, J, 4))
+    gpos = np.empty((F, J, 3))
+    for j in range(J):
+        p = parents[j]
+        if p < 0:
+            grot[:, j] = motion.rotations[:, j]
+            gpos[:, j] = motion.translations[:, j]
+        else:
+            grot[:, j] = R.quat_mul(grot[:, p], motion.rotations[:, j])
+            gpos[:, j] = gpos[:, p] + R.quat_rotate(grot[:, p], motion.translations[:, j])
+    return grot, gpos
+
+
+def forward_kinematics(motion: Motion) -> np.ndarray:
+    """World positions ``(F, J, 3)`` of all J joints in file order (End Sites excluded), file units."""
+    return global_transforms(motion)[1]
+
+
+def global_rotations(motion: Motion) -> np.ndarray:
+    """World rotations ``(F, J, 4)`` (w, x, y, z) of all joints in file order."""
+    return global_transforms(motion)[0]
+
+
+def fk_positions(rotations: jax.Array, translations: jax.Array, parents: Sequence[int]) -> jax.Array:
+    """Batched jnp forward kinematics: ``(..., J, 4)``, ``(..., J, 3)`` -> world positions ``(..., J, 3)``.
+
+    ``parents`` is a static Python sequence (parents before children), so the loop unrolls under jit.
+    """
+    grot, gpos = [], []
+    for j, p in enumerate(parents):
+        if p < 0:
+            grot.append(rotations[..., j, :])
+            gpos.append(translations[..., j, :])
+        else:
+            grot.append(R.quat_mul(grot[p], rotations[..., j, :]))
+            gpos.append(gpos[p] + R.quat_rotate(grot[p], translations[..., j, :]))
+    return jnp.stack(gpos, axis=-2)
+
+
+def joint_velocities(positions: np.ndarray, fps: float) -> np.ndarray:
+    """Per-second joint velocities ``(F, ..., 3)`` by backward differences; frame 0 repeats frame 1."""
+    positions = np.asarray(positions, np.float64)
+    v = np.empty_like(positions)
+    if len(positions) < 2:
+        v[:] = 0.0
+        return v
+    v[1:] = (positions[1:] - positions[:-1]) * fps
+    v[0] = v[1]
+    return v
+
+
+# ---------------------------------------------------------------------------------------------------
+# Mirroring
+
+_LR_PATTERNS = [
+    (r"_L$", "_R"), (r"_R$", "_L"),
+    (r"^Left", "Right"), (r"^Right", "Left"),
+    (r"^left", "right"), (r"^right", "left"),
+    (r"^L_", "R_"), (r"^R_", "L_"),
+    (r"\.L$", ".R"), (r"\.R$", ".L"),
+    (r"(?<=:)Left", "Right"), (r"(?<=:)Right", "Left"),
+]
+
+
+def mirror_partner(name: str) -> str:
+    """The L/R counterpart of a joint name (the name itself for central joints)."""
+    for pat, rep in _LR_PATTERNS:
+        if re.search(pat, name):
+            return re.sub(pat, rep, name, count=1)
+    return name
+
+
+def mirror_pairs(skeleton: Skeleton) -> np.ndarray:
+    """Index permutation ``perm`` with ``perm[j]`` = index of joint j's mirror partner (itself if central).
+
+    A side joint whose partner is missing maps to itself.
+    """
+    idx = {n: i for i, n in enumerate(skeleton.names)}
+    return np.array([idx.get(mirror_partner(n), i) for i, n in enumerate(skeleton.names)])
+
+
+def _reflection(axis: int) -> np.ndarray:
+    m = np.eye(3)
+    m[axis, axis] = -1.0
+    return m
+
+
+def mirror_frames(skeleton: Skeleton, axis: int = 0) -> np.ndarray:
+    """Per-joint local reflection ``M_j`` (J, 3, 3) relating a joint's frame to its partner's frame.
+
+    ``M_j`` is the axis reflection that best maps the offsets of joint j's children onto the offsets of
+    their mirror partners (``o_perm(c) ~= M_j o_c``). Rigs use different local axes on the left and right
+    (Bandai-Namco's bones run along +X on the left and -X on the right), so a single world reflection of
+    the local rotations would put the mirrored pose in the wrong frames. A joint with no child offsets
+    inherits its parent's; the world frame (parent of the root) uses the sagittal reflection ``axis``.
+    """
+    perm = mirror_pairs(skeleton)
+    parents = skeleton.parents
+    J = skeleton.num_joints
+    frames = np.empty((J, 3, 3))
+    cands = [_reflection(a) for a in range(3)]
+    for j in range(J):
+        parent_frame = _reflection(axis) if parents[j] < 0 else frames[parents[j]]
+        kids = [c for c in np.flatnonzero(parents == j) if np.linalg.norm(skeleton.offsets[c]) > 1e-6]
+        if not kids:
+            frames[j] = parent_frame
+            continue
+        src = skeleton.offsets[kids]
+        dst = skeleton.offsets[perm[kids]]
+        errs = [np.abs(src @ m.T - dst).sum() for m in cands]
+        frames[j] = cands[int(np.argmin(errs))]
+    return frames
+
+
+def mirror(motion: Motion, axis: int = 0) -> Motion:
+    """Mirror a motion about the sagittal plane (world normal ``axis``, X by default), swapping L/R joints.
+
+    With ``S`` the world reflection and ``M_j`` the per-joint frame reflections of :func:`mirror_frames`,
+    world rotations become ``G'_j = S G_perm(j) M_j`` and world positions ``p'_j = S p_perm(j)`` exactly,
+    i.e. local rotations ``q'_j = M_parent q_perm(j) M_j`` and local translations
+    ``t'_j = M_parent t_perm(j)``. On a symmetric rig the mirrored local translations equal the rest
+    offsets, so the mirror of a valid pose is a valid pose in the rig's own joint frames. Applying it
+    twice is the identity (to rounding).
+    """
+    sk = motion.skeleton
+    perm = mirror_pairs(sk)
+    frames = mirror_frames(sk, axis)
+    world = _reflection(axis)
+    mats = R.quat_to_matrix(motion.rotations)  # (F, J, 3, 3)
+    new_m = np.empty_like(mats)
+    new_t = np.empty_like(motion.translations)
+    for j in range(sk.num_joints):
+        p = sk.parents[j]
+        mp = world if p < 0 else frames[p]
+        new_m[:, j] = mp @ mats[:, perm[j]] @ frames[j]
+        new_t[:, j] = motion.translations[:, perm[j]] @ mp.T
+    return motion.replace(rotations=R.matrix_to_quat(new_m), translations=new_t)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Root yaw
+
+
+def _up_vector(up_axis: int) -> np.ndarray:
+    u = np.zeros(3)
+    u[up_axis] = 1.0
+    return u
+
+
+def swing_twist(q: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Decompose ``q = swing * twist`` with ``twist`` a rotation about ``axis`` (unit vector)."""
+    q = np.asarray(q, np.float64)
+    proj = np.sum(q[..., 1:] * axis, axis=-1, keepdims=True) * axis
+    twist = np.concatenate([q[..., :1], proj], axis=-1)
+    n = np.linalg.norm(twist, axis=-1, keepdims=True)
+    ident = np.zeros_like(twist)
+    ident[..., 0] = 1.0
+    twist = np.where(n > 1e-12, twist / np.maximum(n, 1e-12), ident)
+    swing = R.quat_mul(q, R.quat_inv(twist))
+    return swing, twist
+
+
+def _root_and_parent(skeleton: Skeleton, root: str | None):
+    if root is None:
+        root_idx = _hips_index(skeleton)
+    else:
+        root_idx = skeleton.index(root)
+    return root_idx, int(skeleton.parents[root_idx])
+
+
+def _hips_index(skeleton: Skeleton) -> int:
+    """The hips: the first joint from the file root with more than one child (skips static wrappers)."""
+    j = int(np.flatnonzero(skeleton.parents < 0)[0])
+    while True:
+        kids = np.flatnonzero(skeleton.parents == j)
+        if len(kids) != 1:
+            return j
+        j = int(kids[0])
+
+
+def remove_root_yaw(motion: Motion, root: str | None = None) -> tuple[Motion, np.ndarray]:
+    """Remove the rotation about the vertical axis from the root joint's *global* rotation.
+
+    Swing-twist decomposition about the skeleton's up axis of the hips' world rotation ``G = S T``... in
+    the world frame: ``G = T_yaw * G'`` with ``T_yaw`` a rotation about up; the returned motion has
+    ``G'`` (its local rotation adjusted through the static parent, e.g. Bandai-Namco's ``joint_Root``) and
+    its horizontal translation rotated by ``T_yaw^-1`` about the vertical axis through the origin, so that
+    the whole body is turned to face the canonical direction. Returns ``(motion, yaw (F, 4))``.
+
+    References: Kuriyama et al. 2022, §3.1 (root orientation: the vertical component is cancelled
+    before encoding and copied back from the content after transfer).
+    """
+    sk = motion.skeleton
+    r, p = _root_and_parent(sk, root)
+    up = _up_vector(sk.up_axis)
+    grot = global_rotations(motion)
+    g_root = grot[:, r]
+    # World-frame decomposition: G = T * S with T about up  <=>  G^-1 = S^-1 T^-1; use swing_twist on G^-1.
+    swing_inv, twist_inv = swing_twist(R.quat_inv(g_root), up)
+    yaw = R.quat_inv(twist_inv)
+    new_global = R.quat_mul(R.quat_inv(yaw), g_root)
+    new = _set_root_global(motion, r, p, grot, new_global, R.quat_inv(yaw))
+    return new, R.quat_canonicalize(yaw)
+
+
+def restore_root_yaw(motion: Motion, yaw: np.ndarray, root: str | None = None) -> Motion:
+    """Inverse of :func:`remove_root_yaw`: turn the root (rotation and horizontal translation) by ``yaw``."""
+    sk = motion.skeleton
+    r, p = _root_and_parent(sk, root)
+    grot = global_rotations(motion)
+    new_global = R.quat_mul(yaw, grot[:, r])
+    return _set_root_global(motion, r, p, grot, new_global, np.asarray(yaw, np.float64))
+
+
+def _set_root_global(motion, r, p, grot, new_global, turn):
+    rot = motion.rotations.copy()
+    trans = motion.translations.copy()
+    parent_global = grot[:, p] if p >= 0 else None
+    if parent_global is None:
+        rot[:, r] = new_global
+        trans[:, r] = R.quat_rotate(turn, trans[:, r])
+    else:
+        rot[:, r] = R.quat_mul(R.quat_inv(parent_global), new_global)
+        # Turn the root's world position about the vertical axis through the parent's origin.
+        world = R.quat_rotate(parent_global, trans[:, r])
+        trans[:, r] = R.quat_rotate(R.quat_inv(parent_global), R.quat_rotate(turn, world))
+    return motion.replace(rotations=R.quat_canonicalize(rot), translations=trans)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Floor contact
+
+FOOT_HINTS = ("toe", "foot", "ankle")
+
+
+def foot_joints(skeleton: Skeleton) -> list[int]:
+    """Indices of foot and toe joints (names containing toe/foot/ankle), End Sites excluded."""
+    return [i for i, n in enumerate(skeleton.names) if any(h in n.lower() for h in FOOT_HINTS)]
+
+
+def floor_contact(motion: Motion, feet: Sequence[str] | None = None, root: str | None = None) -> Motion:
+    """Set the root's height per frame so the lowest foot/toe joint touches the floor (height 0).
+
+    References: Kuriyama et al. 2022, §3.1 ("determines the root position at each frame to fix the lower
+    foot position on a floor level, using forward kinematics").
+    """
+    sk = motion.skeleton
+    idx = [sk.index(n) for n in feet] if feet else foot_joints(sk)
+    if not idx:
+        raise ValueError(f"skeleton has no foot/toe joints to put on the floor: {sk.names[:5]}...")
+    r, p = _root_and_parent(sk, root)
+    up = sk.up_axis
+    pos = forward_kinematics(motion)
+    lowest = pos[:, idx, up].min(axis=1)  # (F,)
+    shift = np.zeros((motion.num_frames, 3))
+    shift[:, up] = -lowest
+    trans = motion.translations.copy()
+    if p >= 0:
+        grot = global_rotations(motion)
+        shift = R.quat_rotate(R.quat_inv(grot[:, p]), shift)
+    trans[:, r] += shift
+    return motion.replace(translations=trans)

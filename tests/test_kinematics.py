@@ -1,0 +1,118 @@
+"""Forward kinematics, mirroring, yaw removal/restoration, floor contact, velocities."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxgest.motion import bvh
+from jaxgest.motion import kinematics as K
+from jaxgest.motion import rotations as R
+from jaxgest.motion.skeleton import Motion, Skeleton
+
+
+def chain():
+    sk = Skeleton(names=("Hips", "Spine", "Head"), parents=np.array([-1, 0, 1]),
+                  offsets=np.array([[0.0, 100, 0], [0, 10, 0], [0, 20, 0]]))
+    return sk
+
+
+def test_fk_hand_computed_chain():
+    sk = chain()
+    rot = np.zeros((1, 3, 4))
+    rot[..., 0] = 1
+    rot[0, 1] = R.euler_to_quat(np.array([90.0, 0, 0]), "ZXY")  # spine bends 90 deg about Z
+    trans = np.broadcast_to(sk.offsets, (1, 3, 3)).copy()
+    trans[0, 0] = [5, 100, 0]
+    pos = K.forward_kinematics(Motion(sk, rot, trans, fps=30))
+    np.testing.assert_allclose(pos[0], [[5, 100, 0], [5, 110, 0], [-15, 110, 0]], atol=1e-12)
+
+
+def random_motion(rng, sk, F=6):
+    rot = R.quat_normalize(rng.normal(size=(F, sk.num_joints, 4)))
+    trans = np.broadcast_to(sk.offsets, (F, sk.num_joints, 3)).copy()
+    trans[:, 0] += rng.normal(scale=10, size=(F, 3))
+    return Motion(sk, rot, trans, fps=30)
+
+
+def test_jnp_fk_equals_numpy_fk():
+    rng = np.random.default_rng(0)
+    m = random_motion(rng, chain())
+    f = jax.jit(lambda r, t: K.fk_positions(r, t, tuple(int(p) for p in m.skeleton.parents)))
+    out = f(jnp.asarray(m.rotations, jnp.float32), jnp.asarray(m.translations, jnp.float32))
+    np.testing.assert_allclose(np.asarray(out), K.forward_kinematics(m), atol=1e-3)
+
+
+def sym_skeleton():
+    names = ("Hips", "Spine", "UpperLeg_L", "Foot_L", "UpperLeg_R", "Foot_R", "Arm_L", "Arm_R")
+    parents = np.array([-1, 0, 0, 2, 0, 4, 1, 1])
+    # Left bones along +X, right bones along -X in their own frames, as in Bandai-Namco.
+    offsets = np.array([[0, 90.0, 0], [0, 10, 0], [10, -5, 0], [40, 0, 0], [-10, -5, 0], [-40, 0, 0],
+                        [15, 20, 0], [-15, 20, 0]])
+    return Skeleton(names=names, parents=parents, offsets=offsets)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1))
+def test_mirror_twice_is_identity_and_positions_reflect(seed):
+    m = random_motion(np.random.default_rng(seed), sym_skeleton())
+    mm = K.mirror(K.mirror(m))
+    assert R.quat_angle(R.quat_mul(R.quat_inv(mm.rotations), m.rotations)).max() < 1e-9
+    np.testing.assert_allclose(mm.translations, m.translations, atol=1e-9)
+    perm = K.mirror_pairs(m.skeleton)
+    np.testing.assert_allclose(K.forward_kinematics(K.mirror(m)), K.forward_kinematics(m)[:, perm] * [-1, 1, 1],
+                               atol=1e-9)
+    # On a symmetric rig the mirrored local translations are the rig's own offsets (a valid pose).
+    np.testing.assert_allclose(K.mirror(m).translations[:, 1:], np.broadcast_to(m.skeleton.offsets[1:], (6, 7, 3)),
+                               atol=1e-9)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1))
+def test_yaw_removal_then_restore_is_identity(seed):
+    m = random_motion(np.random.default_rng(seed), sym_skeleton())
+    m2, yaw = K.remove_root_yaw(m)
+    back = K.restore_root_yaw(m2, yaw)
+    np.testing.assert_allclose(K.forward_kinematics(back), K.forward_kinematics(m), atol=1e-9)
+    # After removal the hips' world rotation has no twist about the vertical axis.
+    g = K.global_rotations(m2)[:, 0]
+    _, twist = K.swing_twist(R.quat_inv(g), np.array([0.0, 1.0, 0.0]))
+    assert R.quat_angle(twist).max() < 1e-6
+    # yaw is a pure rotation about +Y
+    np.testing.assert_allclose(yaw[:, [1, 3]], 0, atol=1e-12)
+
+
+def test_floor_contact_puts_lowest_foot_on_floor():
+    m = random_motion(np.random.default_rng(1), sym_skeleton())
+    f = K.floor_contact(m)
+    pos = K.forward_kinematics(f)
+    feet = K.foot_joints(m.skeleton)
+    assert feet == [3, 5]
+    np.testing.assert_allclose(pos[:, feet, 1].min(axis=1), 0, atol=1e-9)
+    # Only heights change.
+    np.testing.assert_allclose(pos[..., [0, 2]], K.forward_kinematics(m)[..., [0, 2]], atol=1e-9)
+
+
+def test_velocities_of_constant_motion():
+    x = np.arange(10.0)[:, None, None] * np.array([1.0, 2.0, 0.0])
+    v = K.joint_velocities(x, fps=30)
+    np.testing.assert_allclose(v, np.broadcast_to([30.0, 60.0, 0.0], v.shape))
+
+
+@pytest.mark.realdata
+def test_real_files_mirror_and_yaw(bandai_dir, zeggs_dir):
+    for f in [sorted(bandai_dir.glob("*.bvh"))[0], zeggs_dir / "067_Speech_2_x_1_0.bvh"]:
+        m = bvh.load(f)
+        p = K.forward_kinematics(m)
+        perm = K.mirror_pairs(m.skeleton)
+        assert (perm != np.arange(len(perm))).sum() >= 8
+        np.testing.assert_allclose(K.forward_kinematics(K.mirror(m)), p[:, perm] * [-1, 1, 1], atol=1e-6)
+        m2, yaw = K.remove_root_yaw(m)
+        np.testing.assert_allclose(K.forward_kinematics(K.restore_root_yaw(m2, yaw)), p, atol=1e-6)
+    bn = bvh.load(sorted(bandai_dir.glob("*.bvh"))[0])
+    # Bandai-Namco's rig is symmetric to 0.05 cm: mirrored local translations stay at the rest offsets.
+    assert np.abs(K.mirror(bn).translations[:, 2:] - bn.skeleton.offsets[2:]).max() < 0.05

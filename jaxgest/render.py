@@ -177,6 +177,9 @@ class _Figure:
 def _tmp_beside(out: pathlib.Path) -> str:
     fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=out.suffix or ".tmp", dir=out.parent)
     os.close(fd)
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(tmp, 0o666 & ~mask)  # a normal file's permissions, not mkstemp's 0600
     return tmp
 
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import pathlib
 import time
 from typing import Any, Callable, Iterable, Mapping, Optional
@@ -29,6 +28,7 @@ import numpy as np
 from flax.training.train_state import TrainState  # noqa: F401  (re-exported: the state every step uses)
 
 from jaxgest.errors import CheckpointError, TrainingError
+from jaxgest.io import write_text_atomic
 
 __all__ = [
     "TrainState",
@@ -42,12 +42,7 @@ __all__ = [
 
 def write_json_atomic(path, obj) -> None:
     """Write JSON to ``path`` through a temporary file and ``os.replace`` (never a half-written file)."""
-    path = pathlib.Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "w") as f:
-        json.dump(obj, f, indent=2, sort_keys=True, default=_json_default)
-        f.write("\n")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n")
 
 
 def _json_default(o):

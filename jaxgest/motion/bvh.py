@@ -17,14 +17,13 @@ restores each joint's channel layout, so a saved file reloads with the same hier
 
 from __future__ import annotations
 
-import os
 import pathlib
 import re
-import tempfile
 
 import numpy as np
 
 from jaxgest.errors import DataError
+from jaxgest.io import write_text_atomic
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
 
@@ -349,13 +348,4 @@ def save(motion: Motion, path) -> None:
     path = pathlib.Path(path)
     if not path.parent.is_dir():
         raise BVHError(f"{path}: output directory {path.parent} does not exist")
-    text = dumps(motion)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_text_atomic(path, dumps(motion))

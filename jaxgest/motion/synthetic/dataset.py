@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import csv
+import io
 import itertools
-import os
 import pathlib
-import tempfile
 
 from jaxgest.errors import DataError
+from jaxgest.io import write_text_atomic
 from jaxgest.motion.synthetic.content import CONTENTS
 from jaxgest.motion.synthetic.styles import STYLES
 
@@ -63,10 +63,9 @@ def write_dataset(out_dir, clips=None, seed: int = 0, fps: float = 60.0, seconds
         sf.write(str(out / f"{stem}.wav"), audio, sr, subtype="PCM_16")
         rows.append({"path": f"{stem}.bvh", "content": content, "style": style, "audio": f"{stem}.wav"})
     manifest = out / "manifest.csv"
-    fd, tmp = tempfile.mkstemp(prefix=".manifest.", suffix=".csv", dir=out)
-    with os.fdopen(fd, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=MANIFEST_COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(tmp, manifest)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=MANIFEST_COLUMNS)
+    w.writeheader()
+    w.writerows(rows)
+    write_text_atomic(manifest, buf.getvalue())
     return manifest

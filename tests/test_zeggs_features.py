@@ -1,0 +1,64 @@
+"""ZeroEGGS pose features: layout, inversion, root integration, any skeleton."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jaxgest.motion import bvh
+from jaxgest.motion import kinematics as K
+from jaxgest.motion import rotations as R
+from jaxgest.motion.synthetic import render_clip
+from jaxgest.zeggs import features as Fe
+
+
+@pytest.fixture(scope="module")
+def synthetic_motion():
+    m, _, _ = render_clip("greeting", "energetic", seed=1)
+    return m
+
+
+def check_inverts(m):
+    out = Fe.extract_features(m)
+    x = out["features"]
+    layout = Fe.PoseLayout(m.skeleton.num_joints)
+    assert x.shape == (m.num_frames, layout.size) and np.all(np.isfinite(x))
+    pos, rot = Fe.integrate_root(x[:, layout.root_velocity].astype(np.float64),
+                                 x[:, layout.root_angular_velocity].astype(np.float64), m.fps,
+                                 out["root_position"][0], out["root_rotation"][0])
+    np.testing.assert_allclose(pos, out["root_position"], atol=1e-3)
+    assert R.quat_angle(R.quat_mul(R.quat_inv(rot), out["root_rotation"])).max() < 1e-4
+    back = Fe.features_to_motion(x, m, out["root_position"], out["root_rotation"])
+    np.testing.assert_allclose(K.forward_kinematics(back), K.forward_kinematics(m), atol=1e-3)
+    return out
+
+
+def test_synthetic_features_invert(synthetic_motion):
+    out = check_inverts(synthetic_motion)
+    # The root stands on the ground and faces +Z for the synthetic character.
+    np.testing.assert_allclose(out["root_position"][:, 1], 0.0)
+    fwd = R.quat_rotate(out["root_rotation"], np.array([0.0, 0.0, 1.0]))
+    assert np.all(fwd[:, 2] > 0.9)
+
+
+def test_root_rotation_follows_a_turn(synthetic_motion):
+    m = synthetic_motion
+    turn = R.euler_to_quat(np.array([0.0, 90.0, 0.0]), "XYZ")
+    rot = m.rotations.copy()
+    rot[:, 0] = R.quat_mul(turn, rot[:, 0])
+    trans = m.translations.copy()
+    trans[:, 0] = R.quat_rotate(turn, trans[:, 0])
+    turned = m.replace(rotations=rot, translations=trans)
+    a = Fe.extract_features(m)
+    b = Fe.extract_features(turned)
+    # Root-relative features do not change when the whole character turns; the root yaw does.
+    np.testing.assert_allclose(a["features"], b["features"], atol=1e-3)
+    delta = R.quat_angle(R.quat_mul(b["root_rotation"], R.quat_inv(a["root_rotation"])))
+    np.testing.assert_allclose(np.degrees(delta), 90.0, atol=1e-3)
+
+
+@pytest.mark.realdata
+def test_real_rigs_invert(zeggs_dir, bandai_dir):
+    z = check_inverts(bvh.load(zeggs_dir / "067_Speech_2_x_1_0.bvh"))
+    assert z["features"].shape[1] == 15 * 75 + 6
+    check_inverts(bvh.load(sorted(bandai_dir.glob("*.bvh"))[5]))

@@ -1,0 +1,139 @@
+"""Speech features for ZeroEGGS: log-mel (80 bands) + frame energy at the motion frame rate.
+
+``speech_features(wav_path_or_array, sr=None, fps=60) -> (F, 81)``: librosa mel spectrogram (Hann window
+50 ms, hop 12.5 ms, 80 bands, fmin 20 Hz, fmax 7600 Hz clipped to the Nyquist frequency), log amplitude,
+plus the log energy of each frame, interpolated to the motion rate with ``F = round(duration * fps)``
+frames. Files of any sample rate and channel count are read with soundfile and mixed down. Silent,
+constant and very short audio give finite features (the logs are floored); NaN/inf samples, unreadable
+files and empty audio raise :class:`~jaxgest.errors.AudioError` naming the file.
+
+References: Ghorbani et al. 2023, §3.1 and §4.1 (log-amplitude mel spectrogram, 80 channels, total frame
+energy, FFT Hanning window of 50 ms, hop 12.5 ms, resampled to the animation rate, normalised); SPEC §4
+(the authors' code: fmin 20 Hz, fmax 7600 Hz).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import pathlib
+from typing import Optional, Union
+
+import numpy as np
+
+from jaxgest.errors import AudioError, CheckpointError
+from jaxgest.io import write_text_atomic
+
+N_MELS = 80
+FEATURE_DIM = N_MELS + 1
+WINDOW_S = 0.050
+HOP_S = 0.0125
+FMIN = 20.0
+FMAX = 7600.0
+LOG_FLOOR = 1e-5
+
+
+def load_audio(path, sr: Optional[int] = None) -> tuple[np.ndarray, int]:
+    """Read WAV/FLAC/... as float32 mono (channels averaged), resampled to ``sr`` when given."""
+    import soundfile as sf
+
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise AudioError(f"{path}: no such audio file")
+    try:
+        y, file_sr = sf.read(str(path), dtype="float32", always_2d=True)
+    except Exception as e:  # soundfile raises RuntimeError / LibsndfileError subclasses
+        raise AudioError(f"{path}: unreadable audio ({str(e).splitlines()[0][:120]})") from None
+    y = y.mean(axis=1)
+    _check_samples(y, str(path))
+    if sr is not None and int(sr) != int(file_sr):
+        import librosa
+
+        y = librosa.resample(y, orig_sr=file_sr, target_sr=int(sr)).astype(np.float32)
+        file_sr = int(sr)
+    return y.astype(np.float32), int(file_sr)
+
+
+def _check_samples(y: np.ndarray, name: str) -> None:
+    if y.size == 0:
+        raise AudioError(f"{name}: empty audio (no samples)")
+    if not np.all(np.isfinite(y)):
+        raise AudioError(f"{name}: audio contains NaN or inf samples")
+
+
+def log_mel_energy(y: np.ndarray, sr: int) -> tuple[np.ndarray, float]:
+    """Log-mel + log-energy frames ``(T, 81)`` at the STFT hop, and the hop in seconds."""
+    import librosa
+
+    n_fft = int(round(WINDOW_S * sr))
+    hop = max(1, int(round(HOP_S * sr)))
+    fmax = min(FMAX, sr / 2.0)
+    if len(y) < n_fft:  # very short audio: pad so one frame exists
+        y = np.pad(y, (0, n_fft - len(y)))
+    spec = np.abs(librosa.stft(y, n_fft=n_fft, hop_length=hop, win_length=n_fft, window="hann", center=True))
+    mel_basis = librosa.filters.mel(sr=sr, n_fft=n_fft, n_mels=N_MELS, fmin=min(FMIN, fmax / 2), fmax=fmax)
+    mel = mel_basis @ spec  # amplitude mel spectrogram
+    log_mel = np.log(np.maximum(mel, LOG_FLOOR))
+    energy = np.log(np.maximum(np.sum(spec ** 2, axis=0) / n_fft, LOG_FLOOR ** 2))
+    return np.concatenate([log_mel, energy[None]], axis=0).T.astype(np.float32), hop / sr
+
+
+def speech_features(wav_path_or_array: Union[str, pathlib.Path, np.ndarray], sr: Optional[int] = None,
+                    fps: float = 60.0) -> np.ndarray:
+    """Speech features ``(F, 81)`` at ``fps`` frames per second (``F = round(duration * fps)``, >= 1).
+
+    ``wav_path_or_array``: a path (``sr`` then optionally resamples) or a 1-D/2-D sample array (``sr``
+    required; 2-D arrays are ``(samples, channels)`` and mixed down).
+    """
+    if isinstance(wav_path_or_array, (str, pathlib.Path)):
+        y, sr = load_audio(wav_path_or_array, sr)
+        name = str(wav_path_or_array)
+    else:
+        if sr is None:
+            raise AudioError("speech_features: a sample array needs its sample rate (sr=...)")
+        y = np.asarray(wav_path_or_array, np.float32)
+        if y.ndim == 2:
+            y = y.mean(axis=1)
+        name = "audio array"
+        _check_samples(y, name)
+    if fps <= 0:
+        raise AudioError(f"{name}: frame rate must be positive, got {fps}")
+    feats, hop_s = log_mel_energy(y, int(sr))
+    duration = len(y) / float(sr)
+    frames = max(1, int(round(duration * fps)))
+    # Linear interpolation from STFT frame times (k * hop) to motion frame times (f / fps).
+    src_t = np.arange(feats.shape[0]) * hop_s
+    dst_t = np.arange(frames) / float(fps)
+    out = np.empty((frames, FEATURE_DIM), np.float32)
+    for c in range(FEATURE_DIM):
+        out[:, c] = np.interp(dst_t, src_t, feats[:, c])
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class FeatureStats:
+    """Per-channel mean/std of speech features, saved beside a model (``speech_stats.json``)."""
+
+    mean: np.ndarray
+    std: np.ndarray
+
+    @classmethod
+    def fit(cls, features, eps: float = 1e-3) -> "FeatureStats":
+        x = np.concatenate([np.asarray(f, np.float64).reshape(-1, FEATURE_DIM) for f in features], axis=0) \
+            if isinstance(features, (list, tuple)) else np.asarray(features, np.float64).reshape(-1, FEATURE_DIM)
+        return cls(x.mean(axis=0), np.maximum(x.std(axis=0), eps))
+
+    def normalise(self, x: np.ndarray) -> np.ndarray:
+        return ((np.asarray(x) - self.mean) / self.std).astype(np.float32)
+
+    def save(self, path) -> None:
+        write_text_atomic(path, json.dumps({"mean": self.mean.tolist(), "std": self.std.tolist()}) + "\n")
+
+    @classmethod
+    def load(cls, path) -> "FeatureStats":
+        path = pathlib.Path(path)
+        try:
+            d = json.loads(path.read_text())
+            return cls(np.asarray(d["mean"]), np.asarray(d["std"]))
+        except (OSError, ValueError, KeyError) as e:
+            raise CheckpointError(f"{path}: missing or unreadable speech statistics ({e})") from None

@@ -1,0 +1,98 @@
+"""ZeroEGGS data: speech features, aligned sequences, augmentation, deterministic batches."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from jaxgest.audio import FEATURE_DIM, FeatureStats, load_audio, speech_features
+from jaxgest.errors import AudioError, DataError
+from jaxgest.motion.synthetic import write_dataset
+from jaxgest.zeggs import data as D
+
+
+@pytest.fixture(scope="module")
+def synth_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("zsyn")
+    write_dataset(out, clips=3, seconds=5, progress=False)
+    return out
+
+
+def test_speech_features_shapes_and_degenerate_audio(tmp_path):
+    sr = 16000
+    t = np.arange(sr * 2) / sr
+    y = (0.3 * np.sin(2 * np.pi * 220 * t)).astype(np.float32)
+    f = speech_features(y, sr=sr, fps=60)
+    assert f.shape == (120, FEATURE_DIM) and np.all(np.isfinite(f))
+    for degenerate in (np.zeros(sr), np.full(sr, 0.5), np.zeros(10)):
+        g = speech_features(degenerate, sr=sr, fps=30)
+        assert np.all(np.isfinite(g)) and g.shape[1] == FEATURE_DIM
+    # any rate / channels / container: stereo 44.1 kHz FLAC gives the same frame count
+    stereo = np.stack([np.sin(2 * np.pi * 220 * np.arange(44100 * 2) / 44100)] * 2, axis=1) * 0.3
+    sf.write(tmp_path / "s.flac", stereo, 44100)
+    assert speech_features(tmp_path / "s.flac", fps=60).shape == (120, FEATURE_DIM)
+    y2, sr2 = load_audio(tmp_path / "s.flac", sr=16000)
+    assert sr2 == 16000 and y2.ndim == 1 and abs(len(y2) - 32000) <= 1
+
+
+def test_bad_audio_is_a_clear_error(tmp_path):
+    with pytest.raises(AudioError, match="NaN"):
+        speech_features(np.array([0.0, np.nan, 0.1]), sr=16000)
+    with pytest.raises(AudioError, match="empty"):
+        speech_features(np.zeros(0), sr=16000)
+    (tmp_path / "bad.wav").write_bytes(b"RIFF0000WAVEnope")
+    with pytest.raises(AudioError, match="bad.wav: unreadable"):
+        speech_features(tmp_path / "bad.wav")
+    with pytest.raises(AudioError, match="no such audio"):
+        speech_features(tmp_path / "none.wav")
+    sf.write(tmp_path / "empty.wav", np.zeros(0), 16000)
+    with pytest.raises(AudioError, match="empty"):
+        speech_features(tmp_path / "empty.wav")
+
+
+def test_feature_stats_round_trip(tmp_path):
+    x = np.random.default_rng(0).normal(size=(50, FEATURE_DIM))
+    st = FeatureStats.fit([x[:20], x[20:]])
+    np.testing.assert_allclose(st.normalise(x).mean(0), 0, atol=1e-5)
+    st.save(tmp_path / "s.json")
+    np.testing.assert_allclose(FeatureStats.load(tmp_path / "s.json").mean, st.mean)
+
+
+def test_sequences_and_batches(synth_dir):
+    data = D.load(synth_dir, fps=60, speeds=(0.9, 1.0, 1.1))
+    assert len(data.sequences) == 3 * 2 * 3  # clips x (original, mirrored) x speeds
+    lengths = {round(s.frames / 10) for s in data.sequences if s.name.endswith("@1")}
+    fast = [s for s in data.sequences if s.name.endswith("@1.1")]
+    assert all(s.frames < 300 for s in fast) and lengths
+    kw = dict(seed=3, batch=4, window=64, style_min=64, style_max=128)
+    b = data.batch(5, **kw)
+    assert b["pose"].shape == (4, 64, data.pose_dim) and b["speech"].shape == (4, 64, 81)
+    assert b["style"].shape == (4, 128, data.pose_dim) and b["style_mask"].dtype == bool
+    assert np.all(b["style_mask"].sum(1) >= 64)
+    np.testing.assert_allclose(b["root_position"][:, 0], 0, atol=1e-5)  # windows start at their own origin
+    np.testing.assert_allclose(np.linalg.norm(b["facing"], axis=-1), 1, atol=1e-5)
+    again = data.batch(5, **kw)
+    assert all(np.array_equal(b[k], again[k]) for k in b)
+    other = data.batch(6, **kw)
+    assert not np.array_equal(b["pose"], other["pose"])
+    with pytest.raises(DataError, match="no clip is long enough"):
+        data.batch(0, seed=0, batch=2, window=10_000, style_min=64, style_max=128)
+
+
+def test_folder_without_audio_is_rejected(tmp_path, synth_dir):
+    import shutil
+
+    for f in synth_dir.glob("*.bvh"):
+        shutil.copy(f, tmp_path / f.name)
+    (tmp_path / "manifest.csv").write_text("path,content,style\n" + "".join(
+        f"{f.name},c,s\n" for f in sorted(tmp_path.glob("*.bvh"))))
+    with pytest.raises(DataError, match="no clip has audio"):
+        D.load(tmp_path, fps=60)
+
+
+@pytest.mark.realdata
+def test_real_zeggs_sample_aligns(zeggs_dir):
+    data = D.load(zeggs_dir, fps=30, speeds=(1.0,))
+    s = data.sequences[0]
+    assert data.pose_dim == 15 * 75 + 6 and s.frames == 2065  # 68.8 s at 30 fps, audio and motion agree

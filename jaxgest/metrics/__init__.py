@@ -4,17 +4,52 @@ References: Kuriyama et al. 2022, §4.2, eqs. 13-16; SPEC §5 for the ZeroEGGS m
 """
 
 from jaxgest.metrics.dtw import dtw, dtw_numpy, dtw_wavefront, path_distances
-from jaxgest.metrics.generation import (beat_alignment, beat_alignment_from_times, frechet_distance,
-                                        frechet_distance_from_statistics, gaussian_statistics, hand_speed,
-                                        kinematic_beats, linear_probe_accuracy, onset_times, shuffled_control)
-from jaxgest.metrics.transfer_errors import (arm_velocities, content_error, content_error_components,
-                                             hands_metres, style_error, style_error_components,
-                                             summarize_errors, window_for_fps, window_statistics)
+from jaxgest.metrics.generation import (
+    beat_alignment,
+    beat_alignment_from_times,
+    frechet_distance,
+    frechet_distance_from_statistics,
+    gaussian_statistics,
+    hand_speed,
+    kinematic_beats,
+    linear_probe_accuracy,
+    onset_times,
+    shuffled_control,
+)
+from jaxgest.metrics.transfer_errors import (
+    arm_velocities,
+    content_error,
+    content_error_components,
+    hands_metres,
+    style_error,
+    style_error_components,
+    summarize_errors,
+    window_for_fps,
+    window_statistics,
+)
 
 __all__ = [
-    "arm_velocities", "beat_alignment", "beat_alignment_from_times", "content_error",
-    "content_error_components", "dtw", "dtw_numpy", "dtw_wavefront", "frechet_distance",
-    "frechet_distance_from_statistics", "gaussian_statistics", "hand_speed", "hands_metres",
-    "kinematic_beats", "linear_probe_accuracy", "onset_times", "path_distances", "shuffled_control",
-    "style_error", "style_error_components", "summarize_errors", "window_for_fps", "window_statistics",
+    "arm_velocities",
+    "beat_alignment",
+    "beat_alignment_from_times",
+    "content_error",
+    "content_error_components",
+    "dtw",
+    "dtw_numpy",
+    "dtw_wavefront",
+    "frechet_distance",
+    "frechet_distance_from_statistics",
+    "gaussian_statistics",
+    "hand_speed",
+    "hands_metres",
+    "kinematic_beats",
+    "linear_probe_accuracy",
+    "onset_times",
+    "path_distances",
+    "shuffled_control",
+    "style_error",
+    "style_error_components",
+    "summarize_errors",
+    "window_for_fps",
+    "window_statistics",
 ]

@@ -16,7 +16,6 @@ References: Sakoe & Chiba 1978 (DTW); Salvador & Chan 2007 (FastDTW), as used in
 
 from __future__ import annotations
 
-
 import chex
 import jax
 import jax.numpy as jnp
@@ -108,23 +107,28 @@ def dtw(a, b) -> tuple[float, np.ndarray]:
     """Exact DTW of two sequences: ``(cost, path)``.
 
     a: (N, C), b: (M, C) (1-D inputs are treated as C = 1). The forward pass is the jit-compiled JAX
-    wavefront :func:`dtw_wavefront` in the inputs' precision (float32 unless jax x64 is enabled); lengths are
-    padded to a multiple of 64 so nearby lengths reuse one compilation. The path is backtracked in NumPy and
-    ``cost`` (a Python float) is re-summed in float64 over the path's frame distances, i.e. exactly the sum
-    of ||a_i - b_j||_2 along the returned path. path: (K, 2) int64, max(N, M) <= K <= N + M - 1.
+    wavefront :func:`dtw_wavefront`, run in float64 (``jax.enable_x64`` locally, whatever the global setting)
+    so that costs and tie-breaking agree with the float64 reference :func:`dtw_numpy`; lengths are padded to
+    a multiple of 64 so nearby lengths reuse one compilation. The path is backtracked in NumPy. ``cost`` (a
+    Python float) is the accumulated cost at (N-1, M-1) = the sum of ||a_i - b_j||_2 along the returned path.
+    path: (K, 2) int64, max(N, M) <= K <= N + M - 1. Not traceable itself (NumPy backtracking).
 
     References: Sakoe & Chiba 1978 (exact DTW); the quantity FastDTW approximates in Kuriyama et al. 2022,
     eq. 14 (SPEC §5: exact DTW in place of FastDTW).
     """
     a, b = _check_pair(a, b)
     n, m = len(a), len(b)
-    dtype = jnp.result_type(float)  # float32, or float64 under x64
-    pad = lambda x, k: np.concatenate([x, np.zeros((k - len(x), x.shape[1]), x.dtype)])
+    pad = lambda x, k: np.concatenate([x, np.zeros((k - len(x), x.shape[1]))]).astype(np.float64)
     big_n, big_m = (-(-k // _BUCKET) * _BUCKET for k in (n, m))
-    _, pred = dtw_wavefront(jnp.asarray(pad(a, big_n), dtype), jnp.asarray(pad(b, big_m), dtype),
-                            jnp.asarray(n, jnp.int32), jnp.asarray(m, jnp.int32))
-    path = _backtrack(np.asarray(pred), n, m)
-    return float(np.sum(path_distances(a, b, path))), path
+    with jax.enable_x64(True):  # float64 locally: exact ties break as in the float64 reference
+        cost, pred = dtw_wavefront(
+            jnp.asarray(pad(a, big_n)),
+            jnp.asarray(pad(b, big_m)),
+            jnp.asarray(n, jnp.int32),
+            jnp.asarray(m, jnp.int32),
+        )
+        cost, pred = float(cost), np.asarray(pred)
+    return cost, _backtrack(pred, n, m)
 
 
 def dtw_numpy(a, b) -> tuple[float, np.ndarray]:

@@ -12,12 +12,11 @@ All functions are deterministic NumPy (float64); librosa only for onset detectio
 
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 from jaxgest.errors import AudioError, DataError
-
 
 # --------------------------------------------------------------------------------------------------------
 # Linear probe
@@ -32,8 +31,9 @@ def _embeddings(x, name: str) -> np.ndarray:
     return x
 
 
-def linear_probe_accuracy(train_emb, train_labels: Sequence, test_emb, test_labels: Sequence, *,
-                          l2: float = 1e-3) -> float:
+def linear_probe_accuracy(
+    train_emb, train_labels: Sequence, test_emb, test_labels: Sequence, *, l2: float = 1e-3
+) -> float:
     """Accuracy of a closed-form ridge classifier fitted on (train_emb, train_labels), on the test set.
 
     train_emb: (N, D), test_emb: (T, D); labels: any hashables (style names), lengths N and T. Features are
@@ -92,9 +92,19 @@ def onset_times(audio, sr: int) -> np.ndarray:
         raise AudioError(f"onset_times: sampling rate must be > 0, got {sr}")
     hop = 512
     frames = lambda seconds: max(1, int(seconds * sr // hop))
-    onsets = librosa.onset.onset_detect(y=y, sr=int(sr), hop_length=hop, units="time", backtrack=False,
-                                        pre_max=frames(0.03), post_max=1, pre_avg=frames(0.10),
-                                        post_avg=int(0.10 * sr // hop) + 1, wait=frames(0.03), delta=0.07)
+    onsets = librosa.onset.onset_detect(
+        y=y,
+        sr=int(sr),
+        hop_length=hop,
+        units="time",
+        backtrack=False,
+        pre_max=frames(0.03),
+        post_max=1,
+        pre_avg=frames(0.10),
+        post_avg=int(0.10 * sr // hop) + 1,
+        wait=frames(0.03),
+        delta=0.07,
+    )
     return np.asarray(onsets, np.float64)
 
 
@@ -156,8 +166,16 @@ def beat_alignment(hand_speed, fps: float, onsets_s, *, sigma: float = 0.1) -> f
     return beat_alignment_from_times(kinematic_beats(hand_speed, fps), onsets_s, sigma=sigma)
 
 
-def shuffled_control(hand_speed, fps: float, onsets_s, *, sigma: float = 0.1, seed: int = 0,
-                     other_onsets_s=None, n_shifts: int = 16) -> float:
+def shuffled_control(
+    hand_speed,
+    fps: float,
+    onsets_s,
+    *,
+    sigma: float = 0.1,
+    seed: int = 0,
+    other_onsets_s=None,
+    n_shifts: int = 16,
+) -> float:
     """BeatAlign of the same motion against onsets that do not belong to it (chance level).
 
     With ``other_onsets_s`` (onsets of another clip), the score against those. Otherwise the mean over
@@ -174,7 +192,9 @@ def shuffled_control(hand_speed, fps: float, onsets_s, *, sigma: float = 0.1, se
     duration = len(np.asarray(hand_speed).reshape(-1)) / float(fps)
     onsets = np.asarray(onsets_s, np.float64).reshape(-1)
     offsets = np.random.default_rng(seed).uniform(0.0, duration, size=n_shifts)
-    scores = [beat_alignment_from_times(beats, np.mod(onsets + off, duration), sigma=sigma) for off in offsets]
+    scores = [
+        beat_alignment_from_times(beats, np.mod(onsets + off, duration), sigma=sigma) for off in offsets
+    ]
     return float(np.mean(scores))
 
 

@@ -19,7 +19,7 @@ References: Kuriyama et al. 2022, §4.2, eqs. 13-16.
 from __future__ import annotations
 
 import math
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from jaxgest.errors import DataError
 from jaxgest.metrics.dtw import dtw, path_distances
 
 
-def _as_frames(x, name: str, channels: Optional[int] = None) -> np.ndarray:
+def _as_frames(x, name: str, channels: int | None = None) -> np.ndarray:
     x = np.asarray(x, np.float64)
     if x.ndim != 2 or (channels is not None and x.shape[1] != channels):
         want = f"(frames, {channels})" if channels is not None else "(frames, channels)"
@@ -87,9 +87,12 @@ def content_error(content_hands, transfer_hands, *, trim: int = 0) -> dict:
 
     References: Kuriyama et al. 2022, eqs. 13-14 and §4.2 (mean / worst / worst 25 %).
     """
-    pc = _trim(_as_frames(content_hands, "content_error: content_hands", 6), trim, "content_error: content_hands")
-    px = _trim(_as_frames(transfer_hands, "content_error: transfer_hands", 6), trim,
-               "content_error: transfer_hands")
+    pc = _trim(
+        _as_frames(content_hands, "content_error: content_hands", 6), trim, "content_error: content_hands"
+    )
+    px = _trim(
+        _as_frames(transfer_hands, "content_error: transfer_hands", 6), trim, "content_error: transfer_hands"
+    )
     return summarize_errors(content_error_components(pc, px))
 
 
@@ -100,7 +103,7 @@ def window_for_fps(fps: float, theta_at_60: int = 128) -> int:
     """
     if not fps > 0 or theta_at_60 < 1:
         raise DataError(f"window_for_fps: need fps > 0 and theta_at_60 >= 1, got {fps} and {theta_at_60}")
-    return max(1, int(math.floor(theta_at_60 * fps / 60.0 + 0.5)))
+    return max(1, math.floor(theta_at_60 * fps / 60.0 + 0.5))
 
 
 def window_statistics(features, window: int) -> tuple[np.ndarray, np.ndarray]:
@@ -121,7 +124,7 @@ def window_statistics(features, window: int) -> tuple[np.ndarray, np.ndarray]:
     return segs.mean(axis=1), segs.std(axis=1)
 
 
-def _group_norm(diff: np.ndarray, joint_dims: Optional[int]) -> np.ndarray:
+def _group_norm(diff: np.ndarray, joint_dims: int | None) -> np.ndarray:
     """L2 norm over the last axis, or the sum of per-joint L2 norms over groups of ``joint_dims`` channels."""
     if joint_dims is None:
         return np.linalg.norm(diff, axis=-1)
@@ -131,8 +134,9 @@ def _group_norm(diff: np.ndarray, joint_dims: Optional[int]) -> np.ndarray:
     return np.linalg.norm(per_joint, axis=-1).sum(axis=-1)
 
 
-def style_error_components(transfer_vel, style_vel, window: int, *, joint_dims: Optional[int] = None
-                           ) -> np.ndarray:
+def style_error_components(
+    transfer_vel, style_vel, window: int, *, joint_dims: int | None = None
+) -> np.ndarray:
     """E_k^style = min_j D_mean(rho^x_k, rho^s_j) + D_std(rho^x_k, rho^s_j) for every transfer window k; ``(K,)``.
 
     D_mean / D_std: L2 norm of the difference of the window means / stds (``joint_dims=None``), or the sum
@@ -147,8 +151,9 @@ def style_error_components(transfer_vel, style_vel, window: int, *, joint_dims: 
     return d.min(axis=1)
 
 
-def style_error(transfer_vel, style_vel, window: int, *, trim: int = 0, joint_dims: Optional[int] = None
-                ) -> dict:
+def style_error(
+    transfer_vel, style_vel, window: int, *, trim: int = 0, joint_dims: int | None = None
+) -> dict:
     """Style error of a transfer: ``{"mean", "worst", "w25"}`` of eq. 15 over the windows of eq. 16.
 
     transfer_vel: (Fx, C), style_vel: (Fs, C) per-frame features -- the velocities (per second, e.g. m/s) of
@@ -173,8 +178,9 @@ def _world(world_positions, name: str) -> np.ndarray:
     return p
 
 
-def arm_velocities(world_positions, fps: float, joint_indices: Sequence[int], *, scale: float = 1.0
-                   ) -> np.ndarray:
+def arm_velocities(
+    world_positions, fps: float, joint_indices: Sequence[int], *, scale: float = 1.0
+) -> np.ndarray:
     """Per-second velocities of the chosen joints, flattened: ``(F, J, 3) -> (F - 1, 3 * len(joint_indices))``.
 
     v_t = (p_{t+1} - p_t) * fps * scale for the joints in ``joint_indices`` (in order; channels are

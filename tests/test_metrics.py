@@ -122,6 +122,23 @@ def test_dtw_wavefront_cost_and_padding_invariance():
         np.testing.assert_allclose(float(cost), ref, rtol=1e-5)
 
 
+def test_dtw_wavefront_jit_equals_eager():
+    import jax
+    import jax.numpy as jnp
+
+    rng = np.random.default_rng(18)
+    a, b = (
+        jnp.asarray(rng.normal(size=(9, 2)), jnp.float32),
+        jnp.asarray(rng.normal(size=(6, 2)), jnp.float32),
+    )
+    cost, pred = dtw_wavefront(a, b, 4, 3)
+    with jax.disable_jit():
+        cost_e, pred_e = dtw_wavefront(a, b, 4, 3)
+    np.testing.assert_allclose(float(cost), float(cost_e), rtol=1e-6)
+    np.testing.assert_array_equal(np.asarray(pred), np.asarray(pred_e))
+    np.testing.assert_allclose(float(cost), dtw_numpy(np.asarray(a)[:4], np.asarray(b)[:3])[0], rtol=1e-5)
+
+
 def test_dtw_lengths_in_one_bucket_share_a_compilation():
     rng = np.random.default_rng(4)
     dtw(rng.normal(size=(10, 3)), rng.normal(size=(12, 3)))

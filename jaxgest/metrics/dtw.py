@@ -80,8 +80,20 @@ def dtw_wavefront(a: jax.Array, b: jax.Array, n: jax.Array, m: jax.Array) -> tup
     return at_n[n + m - 2], pred
 
 
+def _float64_scope():
+    """A context in which JAX computes in float64 (``jax.enable_x64``; older JAX: ``jax.experimental``)."""
+    if hasattr(jax, "enable_x64"):
+        return jax.enable_x64(True)
+    from jax.experimental import enable_x64  # JAX < 0.7
+
+    return enable_x64()
+
+
 def _backtrack(pred: np.ndarray, n: int, m: int) -> np.ndarray:
-    """Follow the stored predecessors from (n-1, m-1) back to (0, 0); (K, 2) int64 path, start first."""
+    """Follow the stored predecessors from (n-1, m-1) back to (0, 0); (K, 2) int64 path, start first.
+
+    References: Sakoe & Chiba 1978 (optimal path by backtracking the DTW recursion).
+    """
     i, j = n - 1, m - 1
     path = [(i, j)]
     while i > 0 or j > 0:
@@ -97,7 +109,10 @@ def _backtrack(pred: np.ndarray, n: int, m: int) -> np.ndarray:
 
 
 def path_distances(a, b, path: np.ndarray) -> np.ndarray:
-    """Euclidean frame distances ``(K,)`` (float64) of the aligned pairs of ``path`` ((K, 2) indices)."""
+    """Euclidean frame distances ``(K,)`` (float64) of the aligned pairs of ``path`` ((K, 2) indices).
+
+    a: (N, C), b: (M, C). References: Kuriyama et al. 2022, eq. 13 (||p^c_{c_i} - p^x_{x_i}||_2 per pair).
+    """
     a = np.asarray(a, np.float64).reshape(len(a), -1)
     b = np.asarray(b, np.float64).reshape(len(b), -1)
     return np.linalg.norm(a[path[:, 0]] - b[path[:, 1]], axis=-1)
@@ -120,7 +135,7 @@ def dtw(a, b) -> tuple[float, np.ndarray]:
     n, m = len(a), len(b)
     pad = lambda x, k: np.concatenate([x, np.zeros((k - len(x), x.shape[1]))]).astype(np.float64)
     big_n, big_m = (-(-k // _BUCKET) * _BUCKET for k in (n, m))
-    with jax.enable_x64(True):  # float64 locally: exact ties break as in the float64 reference
+    with _float64_scope():  # float64 locally: exact ties break as in the float64 reference
         cost, pred = dtw_wavefront(
             jnp.asarray(pad(a, big_n)),
             jnp.asarray(pad(b, big_m)),

@@ -203,13 +203,19 @@ def shuffled_control(
 
 
 def _psd_sqrt(c: np.ndarray) -> np.ndarray:
-    """Symmetric square root of a symmetric PSD matrix by eigh (negative round-off eigenvalues -> 0)."""
+    """Symmetric square root ``(D, D)`` of a symmetric PSD matrix by eigh (negative round-off eigenvalues -> 0).
+
+    References: spectral theorem; replaces scipy.linalg.sqrtm in FID code (Heusel et al. 2017).
+    """
     w, v = np.linalg.eigh((c + c.T) / 2.0)
     return (v * np.sqrt(np.clip(w, 0.0, None))) @ v.T
 
 
 def gaussian_statistics(features) -> tuple[np.ndarray, np.ndarray]:
-    """Mean ``(D,)`` and unbiased covariance ``(D, D)`` (ddof = 1) of a feature set ``(N, D)``, N >= 2."""
+    """Mean ``(D,)`` and unbiased covariance ``(D, D)`` (ddof = 1) of a feature set ``(N, D)``, N >= 2.
+
+    References: Heusel et al. 2017 (FID: Gaussian fit of the feature distribution).
+    """
     x = _embeddings(features, "frechet_distance: features")
     if len(x) < 2:
         raise DataError(f"frechet_distance: need at least 2 feature vectors, got {len(x)}")

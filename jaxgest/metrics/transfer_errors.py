@@ -13,8 +13,8 @@ Choices where the paper is open (SPEC §5), all documented in the functions:
   * the style features are velocities of the arm joints (§4.2 prose, SPEC, authors' code), although eq. 16
     writes hand positions;
   * D_mean / D_std default to one L2 norm over all channels (eq. 15 as written); ``joint_dims=3`` gives the
-    sum over joints of per-joint norms (SPEC "sum over arm joints", authors' code), whose magnitudes match
-    the paper's Table 1 (about 1-2.5 m/s with 8 arm joints in m/s at 60 fps);
+    sum over joints of per-joint norms (SPEC "sum over arm joints", authors' code), the scale of the paper's
+    Table 1 (1.0-2.65 there; 1.4 on one Bandai-Namco pair, 8 arm joints in m/s, here);
   * ``trim`` (default 0) cuts frames at both ends; the authors' code cuts 60 frames (1 s at 60 fps).
 
 References: Kuriyama et al. 2022, §4.2, eqs. 13-16.

@@ -5,13 +5,15 @@ Kuriyama et al. 2022 (§3.1) represent a pose by the exponential maps of 21 join
 The root (hips) rotation has its yaw about the vertical axis removed before encoding; the yaw is copied back
 from the content clip after transfer and the root height is set by floor contact.
 
-Joint maps are data (``maps/*.json``): body joint name -> joint of a rig. ``bandai_namco`` is the identity
-on the dataset's own rig (a lossless round trip); ``zeggs`` maps the 75-joint ZEGGS rig. Rigs whose joint
-frames differ from the body's (ZEGGS) are retargeted by *direction matching*: each mapped joint's world
-rotation is the rotation that points its bones to the next mapped joints along the same world directions
-as in the source (a least-squares fit, Wahba's problem, where a joint has two or more mapped children; the
-smallest rotation from the template pose where it has one). Unmapped joints (fingers, extra spine joints)
-keep the template's local rotations; twist about a single bone follows the template.
+Joint maps are data (``maps/*.json``): body joint name -> joint of a rig, plus the rig's T-pose.
+``bandai_namco`` is the identity on the dataset's own rig (a lossless round trip; ``joint_Root`` is a
+static wrapper outside the body) and stores the canonical body skeleton (offsets, cm) and its T-pose axes,
+so no data file is needed at run time. ``zeggs`` maps the 75-joint ZEGGS rig, whose rest pose is its T-pose.
+Other rigs are retargeted through the T-poses (:mod:`jaxgest.motion.retarget`): every mapped joint turns
+by the same world rotation away from its T-pose on both rigs (full rotations, so hands, head and twists
+carry over), with a swing correction where a rig has extra joints in a chain. Unmapped joints (ZEGGS
+fingers, Spine, Spine2, Neck1, HeadEnd) keep the template's local rotations. ZEGGS -> body -> ZEGGS on the
+original template is lossless (1e-9).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 
 from jaxgest.errors import DataError
 from jaxgest.motion import kinematics as K
+from jaxgest.motion import retarget as RT
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
 
@@ -81,16 +84,29 @@ def body_skeleton() -> Skeleton:
                     end_sites=ends, up_axis=int(s["up_axis"]))
 
 
-@functools.lru_cache(maxsize=None)
-def reference_pose() -> np.ndarray:
-    """A neutral standing pose of the body (21, 4) local quaternions: the twist reference of retargeting.
+@functools.lru_cache(maxsize=16)
+def tpose_globals(map_name: str, skeleton: Optional[Skeleton] = None) -> np.ndarray:
+    """World rotations (J, 4) of a rig's joints in its T-pose (Y-up, facing +Z, arms horizontal).
 
-    Taken from the built-in synthetic generator's neutral style, so no dataset file is needed.
+    ``bandai_namco``: the body skeleton's T-pose from the map's ``tpose_axes`` (``skeleton`` ignored).
+    Maps with ``"tpose": "rest"``: the rig's rest pose (identity local rotations) of ``skeleton``.
     """
-    from jaxgest.motion.synthetic import render_clip
+    jm = load_map(map_name)
+    if "tpose_axes" in jm:
+        sk = body_skeleton()
+        return np.stack([RT.axes_to_quat(jm["tpose_axes"][n]) for n in sk.names])
+    if jm.get("tpose") == "rest":
+        if skeleton is None:
+            raise ValueError(f"joint map {map_name!r} needs the rig's skeleton for its rest T-pose")
+        ident = np.zeros((skeleton.num_joints, 4))
+        ident[:, 0] = 1.0
+        return K.global_rotations(Motion(skeleton, ident[None], skeleton.offsets[None], 1.0))[0]
+    raise DataError(f"joint map {map_name!r} defines no T-pose (tpose_axes or \"tpose\": \"rest\")")
 
-    motion, _, _ = render_clip("story", "neutral", seed=0)
-    return motion.rotations[0].copy()
+
+def body_tpose() -> np.ndarray:
+    """Local rotations (21, 4) of the canonical body T-pose (the retargeting reference posture)."""
+    return RT.locals_from_globals(body_skeleton(), tpose_globals("bandai_namco"))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -177,117 +193,36 @@ def body_to_motion(upper: np.ndarray, lower: np.ndarray, template: Motion, *, ya
 
 
 # ---------------------------------------------------------------------------------------------------
-# Retargeting by direction matching
-
-
-def _next_mapped(skeleton: Skeleton, j: int, mapped: set) -> list[list[int]]:
-    """Paths from j (exclusive) to each nearest mapped descendant (inclusive), through unmapped joints."""
-    out = []
-    for c in np.flatnonzero(skeleton.parents == j):
-        c = int(c)
-        if c in mapped:
-            out.append([c])
-        else:
-            out.extend([[c] + p for p in _next_mapped(skeleton, c, mapped)])
-    return out
-
-
-def _wahba(local_vecs: np.ndarray, world_vecs: np.ndarray) -> np.ndarray:
-    """Rotation (F, 4) best mapping unit ``local_vecs`` (F, K, 3) onto ``world_vecs`` (F, K, 3)."""
-    b = np.einsum("fki,fkj->fij", world_vecs, local_vecs)
-    u, _, vt = np.linalg.svd(b)
-    d = np.sign(np.linalg.det(u @ vt))
-    u[..., :, 2] *= d[..., None]
-    return R.matrix_to_quat(u @ vt)
-
-
-def _unit(v):
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
-
-
-def retarget_positions(src_positions: np.ndarray, pairs: dict, template: Motion,
-                       root_position: Optional[np.ndarray] = None) -> Motion:
-    """Pose ``template``'s rig so its mapped bones point along the source's bone directions.
-
-    Args:
-      src_positions: (F, Js, 3) world positions of the source joints.
-      pairs: target joint index -> source joint index.
-      template: motion on the target rig with F frames (or 1, broadcast): unmapped joints keep its local
-        rotations; it is also the twist reference of single-bone joints.
-      root_position: (F, 3) world position for the target's mapped root-most joint (default: the source's).
-    """
-    sk = template.skeleton
-    F = src_positions.shape[0]
-    tmpl_rot = np.broadcast_to(template.rotations, (F,) + template.rotations.shape[1:])
-    tmpl_trans = np.broadcast_to(template.translations, (F,) + template.translations.shape[1:])
-    mapped = set(pairs)
-    G = np.empty((F, sk.num_joints, 4))
-    local = tmpl_rot.copy()
-    for j in range(sk.num_joints):
-        p = sk.parents[j]
-        g_init = tmpl_rot[:, j] if p < 0 else R.quat_mul(G[:, p], tmpl_rot[:, j])
-        G[:, j] = g_init
-        if j not in mapped:
-            continue
-        local_vecs, world_vecs = [], []
-        for path in _next_mapped(sk, j, mapped):
-            # Offset of the mapped descendant in j's frame, through the template rotations of intermediates.
-            v = tmpl_trans[:, path[-1]]
-            for i in reversed(path[:-1]):
-                v = tmpl_trans[:, i] + R.quat_rotate(tmpl_rot[:, i], v)
-            w = src_positions[:, pairs[path[-1]]] - src_positions[:, pairs[j]]
-            if np.linalg.norm(v, axis=-1).min() > 1e-6:
-                local_vecs.append(_unit(v))
-                world_vecs.append(_unit(w))
-        if len(local_vecs) >= 2:
-            lv, wv = np.stack(local_vecs, 1), np.stack(world_vecs, 1)
-            rank_ok = np.linalg.matrix_rank(lv[0], tol=1e-3) >= 2
-            if rank_ok:
-                G[:, j] = _wahba(lv, wv)
-            else:
-                G[:, j] = R.quat_mul(R.quat_between(R.quat_rotate(g_init, lv[:, 0]), wv[:, 0]), g_init)
-        elif len(local_vecs) == 1:
-            G[:, j] = R.quat_mul(R.quat_between(R.quat_rotate(g_init, local_vecs[0]), world_vecs[0]), g_init)
-        local[:, j] = G[:, j] if p < 0 else R.quat_mul(R.quat_inv(G[:, p]), G[:, j])
-    trans = tmpl_trans.copy()
-    top = min(mapped, key=lambda j: _depth(sk, j))
-    want = src_positions[:, pairs[top]] if root_position is None else root_position
-    p = sk.parents[top]
-    if p < 0:
-        trans[:, top] = want
-    else:
-        pre = Motion(sk, R.quat_canonicalize(local), trans, template.fps)
-        grot, gpos = K.global_transforms(pre)
-        trans[:, top] = R.quat_rotate(R.quat_inv(grot[:, p]), want - gpos[:, p])
-    return Motion(sk, R.quat_canonicalize(local), trans, template.fps, name=template.name)
-
-
-def _depth(sk: Skeleton, j: int) -> int:
-    d = 0
-    while sk.parents[j] >= 0:
-        j = sk.parents[j]
-        d += 1
-    return d
+# Retargeting through T-poses (jaxgest.motion.retarget)
 
 
 def retarget_to_body(motion: Motion, map_name: Optional[str] = None) -> Motion:
-    """Any mapped rig -> a Motion on :func:`body_skeleton` (direction matching, neutral twist reference)."""
+    """Any mapped rig -> a Motion on :func:`body_skeleton` (same world rotations relative to the T-poses).
+
+    All 21 body joints are mapped, so the result depends on the source only; the hips are placed at the
+    source hips' world position (no rescaling for the rigs' different sizes).
+    """
     map_name = map_name or detect_map(motion.skeleton)
     jm = load_map(map_name)["joints"]
     body = body_skeleton()
     pairs = {body.index(b): motion.skeleton.index(s) for b, s in jm.items()}
-    ref = reference_pose()[None]
-    template = Motion(body, ref, body.offsets[None], motion.fps, name=motion.name)
-    pos = K.forward_kinematics(motion)
-    return retarget_positions(pos, pairs, template)
+    template = Motion(body, body_tpose()[None], body.offsets[None], motion.fps, name=motion.name)
+    return RT.retarget(motion, tpose_globals(map_name, motion.skeleton), template,
+                       tpose_globals("bandai_namco"), pairs)
 
 
 def retarget_from_body(body_motion: Motion, template: Motion, map_name: Optional[str] = None) -> Motion:
-    """A Motion on :func:`body_skeleton` -> ``template``'s rig (unmapped joints from the template)."""
+    """A Motion on :func:`body_skeleton` -> ``template``'s rig.
+
+    Unmapped joints of the rig (ZEGGS: fingers, Spine, Spine2, Neck1, HeadEnd, end joints) keep the
+    template's local rotations (frame by frame when it has as many frames, else its first frame).
+    """
     map_name = map_name or detect_map(template.skeleton)
     jm = load_map(map_name)["joints"]
     body = body_motion.skeleton
     pairs = {template.skeleton.index(s): body.index(b) for b, s in jm.items()}
-    pos = K.forward_kinematics(body_motion)
-    out = retarget_positions(pos, pairs, template)
-    return out.replace(fps=body_motion.fps)
+    if template.num_frames != body_motion.num_frames:
+        template = template.replace(rotations=template.rotations[:1], translations=template.translations[:1])
+    out = RT.retarget(body_motion, tpose_globals("bandai_namco"), template,
+                      tpose_globals(map_name, template.skeleton), pairs)
+    return out.replace(name=template.name)

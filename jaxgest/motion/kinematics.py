@@ -7,15 +7,15 @@ inside jit (losses, features); its parent array is static.
 
 from __future__ import annotations
 
-import re
 from typing import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgest.errors import DataError
 from jaxgest.motion import rotations as R
-from jaxgest.motion.skeleton import Motion, Skeleton
+from jaxgest.motion.skeleton import Motion, Skeleton, mirror_pairs, mirror_partner  # noqa: F401 (re-exported)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -83,33 +83,6 @@ def joint_velocities(positions: np.ndarray, fps: float) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------------
 # Mirroring
-
-_LR_PATTERNS = [
-    (r"_L$", "_R"), (r"_R$", "_L"),
-    (r"^Left", "Right"), (r"^Right", "Left"),
-    (r"^left", "right"), (r"^right", "left"),
-    (r"^L_", "R_"), (r"^R_", "L_"),
-    (r"\.L$", ".R"), (r"\.R$", ".L"),
-    (r"(?<=:)Left", "Right"), (r"(?<=:)Right", "Left"),
-]
-
-
-def mirror_partner(name: str) -> str:
-    """The L/R counterpart of a joint name (the name itself for central joints)."""
-    for pat, rep in _LR_PATTERNS:
-        if re.search(pat, name):
-            return re.sub(pat, rep, name, count=1)
-    return name
-
-
-def mirror_pairs(skeleton: Skeleton) -> np.ndarray:
-    """Index permutation ``perm`` with ``perm[j]`` = index of joint j's mirror partner (itself if central).
-
-    A side joint whose partner is missing maps to itself.
-    """
-    idx = {n: i for i, n in enumerate(skeleton.names)}
-    return np.array([idx.get(mirror_partner(n), i) for i, n in enumerate(skeleton.names)])
-
 
 def _reflection(axis: int) -> np.ndarray:
     m = np.eye(3)
@@ -213,11 +186,17 @@ def _hips_index(skeleton: Skeleton) -> int:
 def remove_root_yaw(motion: Motion, root: str | None = None) -> tuple[Motion, np.ndarray]:
     """Remove the rotation about the vertical axis from the root joint's *global* rotation.
 
-    Swing-twist decomposition about the skeleton's up axis of the hips' world rotation ``G = S T``... in
-    the world frame: ``G = T_yaw * G'`` with ``T_yaw`` a rotation about up; the returned motion has
-    ``G'`` (its local rotation adjusted through the static parent, e.g. Bandai-Namco's ``joint_Root``) and
-    its horizontal translation rotated by ``T_yaw^-1`` about the vertical axis through the origin, so that
-    the whole body is turned to face the canonical direction. Returns ``(motion, yaw (F, 4))``.
+    The hips' world rotation is split (swing-twist about the skeleton's up axis, on the world side)
+    as ``G = T_yaw * G'`` with ``T_yaw`` a rotation about up and ``G'`` free of any rotation about up;
+    the returned motion has ``G'`` (its local rotation adjusted through a static parent such as
+    Bandai-Namco's ``joint_Root``) and the root's world position turned by ``T_yaw^-1`` about the vertical
+    axis through the world origin, so the whole body (and its path) is turned together.
+
+    Facing: ``T_yaw`` is the heading of the hips measured from their T-pose/rest facing, which is +Z for
+    both datasets (Bandai-Namco hips frame X->+Y, Y->-X, Z->+Z; ZEGGS hips frame = world); for upright
+    hips it turns the rest forward (+Z) onto the hips' horizontal forward direction, so a yaw-free motion
+    faces +Z. ``root=None`` picks the hips (the first joint below the file root with several children,
+    i.e. ``Hips`` for both datasets). Returns ``(motion, yaw (F, 4))``; :func:`restore_root_yaw` inverts it.
 
     References: Kuriyama et al. 2022, §3.1 (root orientation: the vertical component is cancelled
     before encoding and copied back from the content after transfer).
@@ -279,7 +258,7 @@ def floor_contact(motion: Motion, feet: Sequence[str] | None = None, root: str |
     sk = motion.skeleton
     idx = [sk.index(n) for n in feet] if feet else foot_joints(sk)
     if not idx:
-        raise ValueError(f"skeleton has no foot/toe joints to put on the floor: {sk.names[:5]}...")
+        raise DataError(f"skeleton {', '.join(sk.names[:4])}, ... has no foot/toe joints to put on the floor")
     r, p = _root_and_parent(sk, root)
     up = sk.up_axis
     pos = forward_kinematics(motion)

@@ -7,6 +7,7 @@ Arrays are NumPy (float64 on load); model code converts to ``jnp`` at its bounda
 from __future__ import annotations
 
 import dataclasses
+import re
 from typing import Optional
 
 import numpy as np
@@ -110,3 +111,46 @@ class Motion:
 
     def replace(self, **kw) -> "Motion":
         return dataclasses.replace(self, **kw)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Left/right pairs (data): (regex on a joint name, replacement giving its mirror partner). The first
+# pattern that matches a name is used. Names keep namespace prefixes (``mixamorig:LeftArm``).
+
+LR_PATTERNS: tuple = (
+    (r"_L$", "_R"), (r"_R$", "_L"),            # Bandai-Namco: UpperArm_L
+    (r"^Left", "Right"), (r"^Right", "Left"),  # ZEGGS / Mixamo: LeftArm
+    (r"^left", "right"), (r"^right", "left"),
+    (r"^L_", "R_"), (r"^R_", "L_"),
+    (r"\.L$", ".R"), (r"\.R$", ".L"),        # Blender: upper_arm.L
+    (r"(?<=:)Left", "Right"), (r"(?<=:)Right", "Left"),  # mixamorig:LeftArm
+)
+
+
+def mirror_partner(name: str) -> str:
+    """The L/R counterpart of a joint name by :data:`LR_PATTERNS` (the name itself for central joints)."""
+    for pat, rep in LR_PATTERNS:
+        if re.search(pat, name):
+            return re.sub(pat, rep, name, count=1)
+    return name
+
+
+def mirror_pairs(skeleton: Skeleton) -> np.ndarray:
+    """Index permutation ``perm`` (J,) with ``perm[j]`` = index of joint j's mirror partner.
+
+    Central joints map to themselves, and so does a side joint whose partner is missing from the rig.
+    ``perm[perm] == arange(J)``.
+    """
+    idx = {n: i for i, n in enumerate(skeleton.names)}
+    perm = np.array([idx.get(mirror_partner(n), i) for i, n in enumerate(skeleton.names)], dtype=np.int64)
+    # A partner whose own partner is not this joint (odd naming) is not a pair: keep both in place.
+    bad = perm[perm] != np.arange(len(perm))
+    perm[bad] = np.flatnonzero(bad)
+    return perm
+
+
+def up_vector(skeleton: Skeleton) -> np.ndarray:
+    """The unit vertical axis (3,) of the skeleton's world frame (``skeleton.up_axis``)."""
+    u = np.zeros(3)
+    u[skeleton.up_axis] = 1.0
+    return u

@@ -12,9 +12,10 @@ Choices where the paper is open (SPEC §5), all documented in the functions:
   * std along frames is the population std (ddof = 0), as in the authors' code;
   * the style features are velocities of the arm joints (§4.2 prose, SPEC, authors' code), although eq. 16
     writes hand positions;
-  * D_mean / D_std default to one L2 norm over all channels (eq. 15 as written); ``joint_dims=3`` gives the
-    sum over joints of per-joint norms (SPEC "sum over arm joints", authors' code), the scale of the paper's
-    Table 1 (1.0-2.65 there; 1.4 on one Bandai-Namco pair, 8 arm joints in m/s, here);
+  * D_mean / D_std are, by default (``joint_dims=3``), the sum over joints of per-joint L2 norms (SPEC §5
+    "sum over arm joints", the authors' code), which is the scale of the paper's Table 1 (1.0-2.65 there;
+    1.4 on one Bandai-Namco pair, 8 arm joints in m/s, here); ``joint_dims=None`` gives one L2 norm over all
+    channels (eq. 15 as literally written);
   * ``trim`` (default 0) cuts frames at both ends; the authors' code cuts 60 frames (1 s at 60 fps).
 
 References: Kuriyama et al. 2022, §4.2, eqs. 13-16.
@@ -139,12 +140,13 @@ def _group_norm(diff: np.ndarray, joint_dims: int | None) -> np.ndarray:
 
 
 def style_error_components(
-    transfer_vel, style_vel, window: int, *, joint_dims: int | None = None
+    transfer_vel, style_vel, window: int, *, joint_dims: int | None = 3
 ) -> np.ndarray:
     """E_k^style = min_j D_mean(rho^x_k, rho^s_j) + D_std(rho^x_k, rho^s_j) for every transfer window k; ``(K,)``.
 
-    D_mean / D_std: L2 norm of the difference of the window means / stds (``joint_dims=None``), or the sum
-    over joints of per-joint L2 norms with ``joint_dims=3`` (SPEC §5 wording and the authors' code).
+    D_mean / D_std: the sum over joints of per-joint L2 norms of the difference of the window means / stds
+    (``joint_dims=3``, default: SPEC §5 and the authors' code), or one L2 norm over all channels
+    (``joint_dims=None``, eq. 15 as literally written).
     References: Kuriyama et al. 2022, eqs. 15-16.
     """
     xm, xs = window_statistics(transfer_vel, window)
@@ -156,7 +158,7 @@ def style_error_components(
 
 
 def style_error(
-    transfer_vel, style_vel, window: int, *, trim: int = 0, joint_dims: int | None = None
+    transfer_vel, style_vel, window: int, *, trim: int = 0, joint_dims: int | None = 3
 ) -> dict:
     """Style error of a transfer: ``{"mean", "worst", "w25"}`` of eq. 15 over the windows of eq. 16.
 
@@ -164,9 +166,9 @@ def style_error(
     the arm joints, see :func:`arm_velocities`; the caller computes them (eq. 16 writes hand positions, §4.2
     prose, SPEC §5 and the authors' code use arm-joint velocities). window: theta in frames
     (:func:`window_for_fps`; 128 at 60 fps), hop floor(theta / 2). ``trim`` cuts that many frames at both ends
-    of both inputs first (default 0; the authors' code cuts 60 at 60 fps). ``joint_dims``: None -> one L2 norm
-    over all C channels (eq. 15 as written); 3 -> sum over joints of per-joint norms (authors' code, SPEC
-    "sum over arm joints"). Clips shorter than one window (after trimming) raise DataError.
+    of both inputs first (default 0; the authors' code cuts 60 at 60 fps). ``joint_dims``: 3 (default) -> sum over
+    joints of per-joint norms (SPEC §5 "sum over arm joints", authors' code); None -> one L2 norm over all C
+    channels (eq. 15 as literally written). Clips shorter than one window (after trimming) raise DataError.
 
     References: Kuriyama et al. 2022, eqs. 15-16 and §4.2 (mean / worst / worst 25 %).
     """

@@ -116,3 +116,119 @@ def test_real_files_mirror_and_yaw(bandai_dir, zeggs_dir):
     bn = bvh.load(sorted(bandai_dir.glob("*.bvh"))[0])
     # Bandai-Namco's rig is symmetric to 0.05 cm: mirrored local translations stay at the rest offsets.
     assert np.abs(K.mirror(bn).translations[:, 2:] - bn.skeleton.offsets[2:]).max() < 0.05
+
+
+def test_fk_chain_with_root_rotation_and_translation_channels():
+    sk = chain()
+    rot = np.zeros((1, 3, 4))
+    rot[..., 0] = 1
+    rot[0, 0] = R.euler_to_quat(np.array([90.0, 0, 0]), "YXZ")  # root turns 90 deg about Y
+    rot[0, 1] = R.euler_to_quat(np.array([90.0, 0, 0]), "XYZ")  # spine pitches 90 deg about X
+    trans = np.broadcast_to(sk.offsets, (1, 3, 3)).copy()
+    trans[0, 1] = [0, 10, 3]  # a joint with its own position channels
+    pos = K.forward_kinematics(Motion(sk, rot, trans, fps=30))
+    # Ry(90): x -> -z, z -> x.  Head offset (0, 20, 0) pitched about X -> (0, 0, 20) -> world (20, 0, 0).
+    np.testing.assert_allclose(pos[0], [[0, 100, 0], [3, 110, 0], [23, 110, 0]], atol=1e-12)
+
+
+def test_jnp_fk_batched_jit_on_body_matches_numpy():
+    from jaxgest.motion.body import body_skeleton
+
+    sk = body_skeleton()
+    rng = np.random.default_rng(2)
+    ms = [random_motion(rng, sk, F=4) for _ in range(2)]
+    rot = jnp.asarray(np.stack([m.rotations for m in ms]), jnp.float32)  # (B, F, J, 4)
+    trans = jnp.asarray(np.stack([m.translations for m in ms]), jnp.float32)
+    f = jax.jit(lambda r, t: K.fk_positions(r, t, tuple(int(p) for p in sk.parents)))
+    out = np.asarray(f(rot, trans))
+    assert out.shape == (2, 4, 21, 3)
+    for b, m in enumerate(ms):
+        np.testing.assert_allclose(out[b], K.forward_kinematics(m), atol=2e-3)
+
+
+def test_mirror_pairs_by_name():
+    names = ("Hips", "UpperArm_L", "UpperArm_R", "LeftHand", "RightHand", "mixamorig:LeftFoot",
+             "mixamorig:RightFoot", "Lonely_L", "Spine")
+    sk = Skeleton(names=names, parents=np.array([-1, 0, 0, 0, 0, 0, 0, 0, 0]), offsets=np.zeros((9, 3)))
+    perm = K.mirror_pairs(sk)
+    np.testing.assert_array_equal(perm, [0, 2, 1, 4, 3, 6, 5, 7, 8])
+    np.testing.assert_array_equal(perm[perm], np.arange(9))
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.floats(-179.0, 179.0))
+def test_yaw_removal_is_invariant_to_turning_the_whole_motion(seed, angle):
+    """Turning a motion about the vertical axis changes only the removed yaw, not the yaw-free motion."""
+    m = random_motion(np.random.default_rng(seed), sym_skeleton())
+    turn = R.euler_to_quat(np.array([angle, 0.0, 0.0]), "YXZ")
+    rot = m.rotations.copy()
+    rot[:, 0] = R.quat_mul(turn, rot[:, 0])
+    trans = m.translations.copy()
+    trans[:, 0] = R.quat_rotate(turn, trans[:, 0])
+    turned = m.replace(rotations=rot, translations=trans)
+    a, yaw_a = K.remove_root_yaw(m)
+    b, yaw_b = K.remove_root_yaw(turned)
+    np.testing.assert_allclose(K.forward_kinematics(b), K.forward_kinematics(a), atol=1e-9)
+    expected = R.quat_mul(turn[None], yaw_a)
+    assert R.quat_angle(R.quat_mul(R.quat_inv(expected), yaw_b)).max() < 1e-9
+
+
+def test_floor_contact_without_feet_is_a_clear_error():
+    from jaxgest.errors import DataError
+
+    m = random_motion(np.random.default_rng(0), chain())
+    with pytest.raises(DataError, match="no foot/toe joints"):
+        K.floor_contact(m)
+
+
+def _scipy_fk(m):
+    """Independent FK: scipy rotations composed as matrices, no jaxgest rotation code."""
+    Rotation = pytest.importorskip("scipy.spatial.transform").Rotation
+    F, J = m.rotations.shape[:2]
+    mats = Rotation.from_quat(m.rotations.reshape(-1, 4)[:, [1, 2, 3, 0]]).as_matrix().reshape(F, J, 3, 3)
+    gm = np.empty_like(mats)
+    gp = np.empty((F, J, 3))
+    for j, p in enumerate(m.skeleton.parents):
+        if p < 0:
+            gm[:, j], gp[:, j] = mats[:, j], m.translations[:, j]
+        else:
+            gm[:, j] = gm[:, p] @ mats[:, j]
+            gp[:, j] = gp[:, p] + np.einsum("fij,fj->fi", gm[:, p], m.translations[:, j])
+    return gp
+
+
+@pytest.mark.realdata
+def test_fk_matches_scipy_on_real_files_and_floor_contact(bandai_dir, zeggs_dir):
+    for f in [bandai_dir / "dataset-1_bow_active_001.bvh", zeggs_dir / "067_Speech_2_x_1_0.bvh"]:
+        m = bvh.load(f)
+        m = m.replace(rotations=m.rotations[:300], translations=m.translations[:300])
+        np.testing.assert_allclose(K.forward_kinematics(m), _scipy_fk(m), atol=1e-8)
+        mm = K.mirror(K.mirror(m))
+        assert R.quat_angle(R.quat_mul(R.quat_inv(mm.rotations), m.rotations)).max() < 1e-9
+        np.testing.assert_allclose(mm.translations, m.translations, atol=1e-9)
+        fl = K.floor_contact(m)
+        feet = K.foot_joints(m.skeleton)
+        np.testing.assert_allclose(K.forward_kinematics(fl)[:, feet, 1].min(axis=1), 0, atol=1e-9)
+
+
+def test_jnp_fk_differentiable_and_traced_once():
+    import chex
+
+    sk = chain()
+    parents = tuple(int(p) for p in sk.parents)
+
+    def loss(r, t):
+        return jnp.sum(K.fk_positions(r, t, parents)[..., 1])
+
+    @jax.jit
+    @chex.assert_max_traces(n=1)
+    def grads(r, t):
+        return jax.grad(loss, argnums=(0, 1))(r, t)
+
+    rng = np.random.default_rng(5)
+    for _ in range(2):
+        m = random_motion(rng, sk, F=3)
+        gr, gt = grads(jnp.asarray(m.rotations, jnp.float32), jnp.asarray(m.translations, jnp.float32))
+        assert gr.shape == (3, 3, 4) and bool(jnp.all(jnp.isfinite(gr)))
+        # d(sum of heights)/d(root height) = number of joints.
+        np.testing.assert_allclose(gt[:, 0, 1], 3.0, rtol=1e-6)

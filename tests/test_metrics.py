@@ -13,20 +13,20 @@ from jaxgest.errors import AudioError, DataError
 from jaxgest.metrics import (
     arm_velocities,
     beat_alignment,
-    beat_alignment_from_times,
     content_error,
     content_error_components,
     dtw,
     dtw_numpy,
     dtw_wavefront,
     frechet_distance,
+    gaussian_smooth,
     hand_speed,
     hands_metres,
     kinematic_beats,
     linear_probe_accuracy,
     onset_times,
     path_distances,
-    shuffled_control,
+    shuffled_beat_alignment,
     style_error,
     style_error_components,
     summarize_errors,
@@ -321,10 +321,12 @@ def test_arm_velocities_and_hands_metres():
     step = np.arange(15, dtype=np.float64).reshape(1, 5, 3)
     pos = 2.0 * t * step + 1.0  # joint j moves by 2 * step[j] per frame
     v = arm_velocities(pos, fps, [3, 1])
-    assert v.shape == (frames - 1, 6)
-    np.testing.assert_allclose(
-        v, np.tile(np.concatenate([step[0, 3], step[0, 1]]) * 2.0 * fps, (frames - 1, 1))
-    )
+    assert v.shape == (frames, 6)
+    np.testing.assert_allclose(v, np.tile(np.concatenate([step[0, 3], step[0, 1]]) * 2.0 * fps, (frames, 1)))
+    wobble = pos + np.sin(t * step)  # non-constant velocity: backward differences, frame 0 = frame 1
+    vw = arm_velocities(wobble, fps, [2])
+    np.testing.assert_allclose(vw[1:], (wobble[1:, 2] - wobble[:-1, 2]) * fps)
+    np.testing.assert_allclose(vw[0], vw[1])
     np.testing.assert_allclose(arm_velocities(pos, fps, [3, 1], scale=0.01), v * 0.01)
     hands = hands_metres(pos, [4, 2])
     assert hands.shape == (frames, 6)
@@ -373,26 +375,50 @@ def test_beat_alignment_values():
     fps = 60.0
     speed = 2.0 - np.cos(2 * np.pi * np.arange(240) / 60.0)  # minima at frames 60, 120, 180
     np.testing.assert_allclose(kinematic_beats(speed, fps), [1.0, 2.0, 3.0])
-    assert beat_alignment(speed, fps, [1.0, 2.0, 3.0]) == pytest.approx(1.0)
-    assert beat_alignment(speed, fps, [1.1, 2.0, 3.0], sigma=0.1) == pytest.approx((math.exp(-0.5) + 2) / 3)
-    assert beat_alignment(speed, fps, [2.0], sigma=0.1) == pytest.approx((2 * math.exp(-50.0) + 1) / 3)
-    assert beat_alignment(speed, fps, []) == 0.0
-    assert beat_alignment_from_times([0.5], [0.7], sigma=0.2) == pytest.approx(math.exp(-0.5))
+    np.testing.assert_allclose(kinematic_beats(speed, fps, smooth_s=0.0), [1.0, 2.0, 3.0])
+    beats = kinematic_beats(speed, fps)
+    assert beat_alignment(beats, [1.0, 2.0, 3.0]) == pytest.approx(1.0)
+    assert beat_alignment(beats, [1.1, 2.0, 3.0], sigma=0.1) == pytest.approx((math.exp(-0.5) + 2) / 3)
+    assert beat_alignment(beats, [2.0], sigma=0.1) == pytest.approx((2 * math.exp(-50.0) + 1) / 3)
+    assert beat_alignment(beats, []) == 0.0
+    assert beat_alignment([0.5], [0.7], sigma=0.2) == pytest.approx(math.exp(-0.5))
     with pytest.raises(DataError, match="no kinematic beat"):
-        beat_alignment(np.linspace(0, 1, 50), fps, [0.1])
+        beat_alignment(kinematic_beats(np.linspace(0, 1, 50), fps), [0.1])
 
 
-def test_shuffled_control():
+def test_kinematic_beats_smoothing_removes_jitter():
+    fps = 60.0
+    t = np.arange(240)
+    slow = 2.0 - np.cos(2 * np.pi * t / 60.0)
+    jitter = slow + 0.05 * (-1.0) ** t  # a local minimum every other frame without smoothing
+    assert len(kinematic_beats(jitter, fps, smooth_s=0.0)) > 50
+    np.testing.assert_allclose(kinematic_beats(jitter, fps), [1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize("n,sigma", [(50, 1.5), (200, 5.0), (7, 3.0), (1, 2.0)])
+def test_gaussian_smooth_matches_scipy(n, sigma):
+    ndimage = pytest.importorskip("scipy.ndimage")
+    x = np.random.default_rng(n).normal(size=n)
+    np.testing.assert_allclose(gaussian_smooth(x, sigma), ndimage.gaussian_filter1d(x, sigma), atol=1e-12)
+    np.testing.assert_array_equal(gaussian_smooth(x, 0.0), x)
+
+
+def test_shuffled_beat_alignment():
     fps = 60.0
     speed = 2.0 - np.cos(2 * np.pi * np.arange(600) / 45.0)  # 0.75 s period
-    onsets = kinematic_beats(speed, fps)
-    aligned = beat_alignment(speed, fps, onsets, sigma=0.05)
-    control = shuffled_control(speed, fps, onsets, sigma=0.05, seed=3)
+    beats = kinematic_beats(speed, fps)
+    onsets = beats.copy()
+    aligned = beat_alignment(beats, onsets, sigma=0.05)
+    control = shuffled_beat_alignment(beats, onsets, 10.0, sigma=0.05, seed=3)
     assert aligned == pytest.approx(1.0)
     assert control < 0.8
-    assert control == shuffled_control(speed, fps, onsets, sigma=0.05, seed=3)
-    other = [0.33, 2.0]
-    assert shuffled_control(speed, fps, onsets, other_onsets_s=other) == beat_alignment(speed, fps, other)
+    assert control == shuffled_beat_alignment(beats, onsets, 10.0, sigma=0.05, seed=3)
+    assert control != shuffled_beat_alignment(beats, onsets, 10.0, sigma=0.05, seed=4)
+    one = shuffled_beat_alignment(beats, onsets, 10.0, sigma=0.05, seed=3, n=1)
+    off = np.random.default_rng(3).uniform(0.0, 10.0, size=1)[0]
+    assert one == pytest.approx(beat_alignment(beats, np.mod(onsets + off, 10.0), sigma=0.05))
+    with pytest.raises(DataError):
+        shuffled_beat_alignment(beats, onsets, 0.0, seed=0)
 
 
 def test_hand_speed():

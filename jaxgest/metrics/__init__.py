@@ -6,15 +6,15 @@ References: Kuriyama et al. 2022, §4.2, eqs. 13-16; SPEC §5 for the ZeroEGGS m
 from jaxgest.metrics.dtw import dtw, dtw_numpy, dtw_wavefront, path_distances
 from jaxgest.metrics.generation import (
     beat_alignment,
-    beat_alignment_from_times,
     frechet_distance,
     frechet_distance_from_statistics,
+    gaussian_smooth,
     gaussian_statistics,
     hand_speed,
     kinematic_beats,
     linear_probe_accuracy,
     onset_times,
-    shuffled_control,
+    shuffled_beat_alignment,
 )
 from jaxgest.metrics.transfer_errors import (
     arm_velocities,
@@ -31,7 +31,6 @@ from jaxgest.metrics.transfer_errors import (
 __all__ = [
     "arm_velocities",
     "beat_alignment",
-    "beat_alignment_from_times",
     "content_error",
     "content_error_components",
     "dtw",
@@ -39,6 +38,7 @@ __all__ = [
     "dtw_wavefront",
     "frechet_distance",
     "frechet_distance_from_statistics",
+    "gaussian_smooth",
     "gaussian_statistics",
     "hand_speed",
     "hands_metres",
@@ -46,7 +46,7 @@ __all__ = [
     "linear_probe_accuracy",
     "onset_times",
     "path_distances",
-    "shuffled_control",
+    "shuffled_beat_alignment",
     "style_error",
     "style_error_components",
     "summarize_errors",

@@ -1,7 +1,7 @@
 """Objective metrics for speech-driven generation (ZeroEGGS) and style embeddings (SPEC §5).
 
 Paper 001 evaluates with user studies only (naturalness, appropriateness, style portrayal, §5.3); its
-"mismatched motion" (MM) control motivates :func:`shuffled_control`. The objective stand-ins here are
+"mismatched motion" (MM) control motivates :func:`shuffled_beat_alignment`. The objective stand-ins here are
 standard metrics, each named after its origin:
   * style-embedding linear-probe accuracy (closed-form ridge classifier on held-out clips);
   * beat alignment of kinematic beats with speech onsets (BeatAlign, Li et al. 2021, AIST++);
@@ -122,26 +122,55 @@ def hand_speed(world_positions, fps: float, hand_indices: Sequence[int]) -> np.n
     return np.concatenate([s[:1], s])
 
 
-def kinematic_beats(hand_speed, fps: float) -> np.ndarray:
-    """Times in seconds ``(B,)`` of the kinematic beats: strict local minima of the hand speed.
+def gaussian_smooth(x, sigma_frames: float) -> np.ndarray:
+    """Gaussian smoothing of a 1-D signal ``(F,) -> (F,)``, equal to ``scipy.ndimage.gaussian_filter1d``.
 
-    Frame t (1 <= t <= F-2) is a beat when s[t] < s[t-1] and s[t] < s[t+1] (scipy's argrelextrema with
-    np.less, order 1); time = t / fps. End frames are never beats.
+    Kernel exp(-t^2 / (2 sigma^2)) normalised to sum 1, truncated at 4 sigma (radius int(4 sigma + 0.5)),
+    boundary mode "reflect" (d c b a | a b c d | d c b a), as scipy's defaults. sigma_frames <= 0 -> copy.
+    References: the Gaussian filter G(., 5) on kinetic velocity in the BeatAlign code of Li et al. 2021.
+    """
+    x = np.asarray(x, np.float64).reshape(-1)
+    if not sigma_frames > 0 or x.size == 0:
+        return x.copy()
+    radius = int(4.0 * float(sigma_frames) + 0.5)
+    t = np.arange(-radius, radius + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (t / float(sigma_frames)) ** 2)
+    kernel /= kernel.sum()
+    # Reflect-pad (half-sample symmetric), repeating the reflection when the kernel is longer than the signal.
+    idx = np.arange(-radius, x.size + radius)
+    period = 2 * x.size
+    idx = np.mod(idx, period)
+    idx = np.where(idx >= x.size, period - 1 - idx, idx)
+    return np.convolve(x[idx], kernel[::-1], mode="valid")
+
+
+def kinematic_beats(hand_speed, fps: float, *, smooth_s: float = 5.0 / 60.0) -> np.ndarray:
+    """Times in seconds ``(B,)`` of the kinematic beats: strict local minima of the smoothed hand speed.
+
+    hand_speed: (F,) per-frame speed (:func:`hand_speed`), frame t at time t / fps. The speed is smoothed by
+    a Gaussian of standard deviation ``smooth_s`` seconds (:func:`gaussian_smooth`, sigma = smooth_s * fps
+    frames; default 5 frames at 60 fps as in the AIST++ BeatAlign code; 0 disables smoothing); frame t
+    (1 <= t <= F-2) is a beat when s[t] < s[t-1] and s[t] < s[t+1] (scipy's argrelextrema with np.less,
+    order 1). End frames are never beats.
     References: Li et al. 2021 (AI Choreographer / AIST++), "kinematic beats" as local minima of velocity.
     """
     s = np.asarray(hand_speed, np.float64).reshape(-1)
     if not np.all(np.isfinite(s)):
         raise DataError("kinematic_beats: hand speed contains NaN or inf")
+    if not fps > 0:
+        raise DataError(f"kinematic_beats: fps must be > 0, got {fps}")
+    s = gaussian_smooth(s, float(smooth_s) * float(fps))
     t = np.nonzero((s[1:-1] < s[:-2]) & (s[1:-1] < s[2:]))[0] + 1
     return t / float(fps)
 
 
-def beat_alignment_from_times(beats_s, onsets_s, *, sigma: float = 0.1) -> float:
+def beat_alignment(beats_s, onsets_s, *, sigma: float = 0.1) -> float:
     """BeatAlign = mean over kinematic beats b of exp(-min_o (b - o)^2 / (2 sigma^2)), in [0, 1].
 
-    beats_s: (B,) kinematic beat times, onsets_s: (K,) audio onset times, seconds. No onsets -> 0. No beats
-    -> DataError (the mean is undefined).
-    References: Li et al. 2021 (AI Choreographer), Beat Alignment Score.
+    beats_s: (B,) kinematic beat times (:func:`kinematic_beats`), onsets_s: (K,) speech onset times
+    (:func:`onset_times`), both in seconds; sigma in seconds (default 0.1). Higher is better; compare with
+    :func:`shuffled_beat_alignment`. No onsets -> 0. No beats -> DataError (the mean is undefined).
+    References: Li et al. 2021 (AI Choreographer), Beat Alignment Score; SPEC §5 (ZEGGS beat alignment).
     """
     b = np.asarray(beats_s, np.float64).reshape(-1)
     o = np.asarray(onsets_s, np.float64).reshape(-1)
@@ -155,46 +184,24 @@ def beat_alignment_from_times(beats_s, onsets_s, *, sigma: float = 0.1) -> float
     return float(np.mean(np.exp(-d2 / (2.0 * sigma**2))))
 
 
-def beat_alignment(hand_speed, fps: float, onsets_s, *, sigma: float = 0.1) -> float:
-    """Beat consistency of hand motion with speech onsets; ``hand_speed (F,)``, ``onsets_s (K,)`` seconds.
-
-    Kinematic beats are the strict local minima of the hand speed (:func:`kinematic_beats`, frame t at
-    t / fps); the score is the BeatAlign mean over beats of exp(-min_dist^2 / (2 sigma^2)), sigma in seconds
-    (default 0.1 s). Higher is better; compare with :func:`shuffled_control`.
-    References: Li et al. 2021 (AI Choreographer), Beat Alignment Score; SPEC §5 (ZEGGS beat alignment).
-    """
-    return beat_alignment_from_times(kinematic_beats(hand_speed, fps), onsets_s, sigma=sigma)
-
-
-def shuffled_control(
-    hand_speed,
-    fps: float,
-    onsets_s,
-    *,
-    sigma: float = 0.1,
-    seed: int = 0,
-    other_onsets_s=None,
-    n_shifts: int = 16,
+def shuffled_beat_alignment(
+    beats_s, onsets_s, duration: float, *, seed: int, n: int = 20, sigma: float = 0.1
 ) -> float:
-    """BeatAlign of the same motion against onsets that do not belong to it (chance level).
+    """Chance-level BeatAlign: the mean over ``n`` circular shifts of the onsets by random offsets.
 
-    With ``other_onsets_s`` (onsets of another clip), the score against those. Otherwise the mean over
-    ``n_shifts`` circular shifts of ``onsets_s`` by offsets drawn uniformly in [0, duration) with
-    ``np.random.default_rng(seed)``, duration = len(hand_speed) / fps (onset times are wrapped modulo the
-    duration). Deterministic for a given seed.
+    beats_s: (B,), onsets_s: (K,) seconds; duration: clip length in seconds (> 0). Offsets are drawn
+    uniformly in [0, duration) with ``np.random.default_rng(seed)``; shifted onsets are wrapped modulo the
+    duration (their count and spacing are kept, their timing relative to the motion is destroyed). Compare
+    with :func:`beat_alignment` of the true onsets. Deterministic for a given seed.
     References: the mismatched-motion (MM) control of Ghorbani et al. 2023, §5.3; Li et al. 2021 BeatAlign.
     """
-    beats = kinematic_beats(hand_speed, fps)
-    if other_onsets_s is not None:
-        return beat_alignment_from_times(beats, other_onsets_s, sigma=sigma)
-    if n_shifts < 1:
-        raise DataError(f"shuffled_control: n_shifts must be >= 1, got {n_shifts}")
-    duration = len(np.asarray(hand_speed).reshape(-1)) / float(fps)
+    if not duration > 0:
+        raise DataError(f"shuffled_beat_alignment: duration must be > 0, got {duration}")
+    if n < 1:
+        raise DataError(f"shuffled_beat_alignment: n must be >= 1, got {n}")
     onsets = np.asarray(onsets_s, np.float64).reshape(-1)
-    offsets = np.random.default_rng(seed).uniform(0.0, duration, size=n_shifts)
-    scores = [
-        beat_alignment_from_times(beats, np.mod(onsets + off, duration), sigma=sigma) for off in offsets
-    ]
+    offsets = np.random.default_rng(seed).uniform(0.0, float(duration), size=n)
+    scores = [beat_alignment(beats_s, np.mod(onsets + off, duration), sigma=sigma) for off in offsets]
     return float(np.mean(scores))
 
 

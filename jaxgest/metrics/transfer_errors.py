@@ -30,6 +30,7 @@ import numpy as np
 
 from jaxgest.errors import DataError
 from jaxgest.metrics.dtw import dtw, path_distances
+from jaxgest.motion import kinematics
 
 
 def _as_frames(x, name: str, channels: int | None = None) -> np.ndarray:
@@ -187,17 +188,19 @@ def _world(world_positions, name: str) -> np.ndarray:
 def arm_velocities(
     world_positions, fps: float, joint_indices: Sequence[int], *, scale: float = 1.0
 ) -> np.ndarray:
-    """Per-second velocities of the chosen joints, flattened: ``(F, J, 3) -> (F - 1, 3 * len(joint_indices))``.
+    """Per-second velocities of the chosen joints, flattened: ``(F, J, 3) -> (F, 3 * len(joint_indices))``.
 
-    v_t = (p_{t+1} - p_t) * fps * scale for the joints in ``joint_indices`` (in order; channels are
-    [j0 xyz, j1 xyz, ...]). ``scale`` converts units (0.01 for centimetres -> metres per second).
+    :func:`jaxgest.motion.kinematics.joint_velocities` (backward differences v_t = (p_t - p_{t-1}) * fps,
+    frame 0 repeats frame 1) of the joints in ``joint_indices`` (in order; channels are
+    [j0 xyz, j1 xyz, ...]), times ``scale`` (0.01 for centimetres -> metres per second). The authors' code
+    uses the F - 1 forward differences; the repeated first frame only enters the first style window.
     References: Kuriyama et al. 2022, §4.2 (velocities of the arm joints; authors' code: 60 * frame diff).
     """
     p = _world(world_positions, "arm_velocities")
     if len(p) < 2:
         raise DataError(f"arm_velocities: need at least 2 frames, got {len(p)}")
     idx = np.asarray(joint_indices, np.int64)
-    v = (p[1:, idx] - p[:-1, idx]) * (float(fps) * float(scale))
+    v = kinematics.joint_velocities(p[:, idx], float(fps)) * float(scale)
     return v.reshape(len(v), -1)
 
 

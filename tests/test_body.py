@@ -38,6 +38,12 @@ def test_body_round_trip_is_lossless_on_random_body_motions(seed):
     back = B.body_to_motion(c.upper, c.lower, m, yaw=c.yaw, floor=False)
     assert R.quat_angle(R.quat_mul(R.quat_inv(back.rotations), m.rotations)).max() < 1e-6
     np.testing.assert_allclose(K.forward_kinematics(back), K.forward_kinematics(m), atol=1e-4)
+    # Any template of the rig will do when yaw and root position are given (here: the T-pose at the origin).
+    at_origin = np.broadcast_to(sk.offsets, (F, 21, 3)).copy()
+    at_origin[:, 0] = 0.0
+    tpose = Motion(sk, np.tile(B.body_tpose(), (F, 1, 1)), at_origin, 60)
+    other = B.body_to_motion(c.upper, c.lower, tpose, yaw=c.yaw, root_position=c.root_position, floor=False)
+    np.testing.assert_allclose(K.forward_kinematics(other), K.forward_kinematics(m), atol=1e-4)
     # The hips exp-map carries no yaw: its rotation has no twist about the vertical axis.
     hips_q = R.expmap_to_quat(c.upper[:, :3])
     _, twist = K.swing_twist(R.quat_inv(hips_q), np.array([0.0, 1.0, 0.0]))
@@ -71,6 +77,15 @@ def test_bandai_round_trip_lossless(bandai_dir):
         back = B.body_to_motion(c.upper, c.lower, m, yaw=c.yaw, floor=False)
         assert R.quat_angle(R.quat_mul(R.quat_inv(back.rotations), m.rotations)).max() < 1e-6
         np.testing.assert_allclose(K.forward_kinematics(back), K.forward_kinematics(m), atol=1e-4)
+    # A clip through the body onto another clip's rig instance, with its yaw and root path.
+    a, b = (bvh.load(f) for f in sorted(bandai_dir.glob("*.bvh"))[3:5])
+    F = min(a.num_frames, b.num_frames)
+    a, b = (x.replace(rotations=x.rotations[:F], translations=x.translations[:F]) for x in (a, b))
+    c = B.motion_to_body(a)
+    out = B.body_to_motion(c.upper, c.lower, b, yaw=c.yaw, root_position=c.root_position, floor=False)
+    np.testing.assert_allclose(K.forward_kinematics(out), K.forward_kinematics(a), atol=1e-4)
+    with pytest.raises(ValueError, match="expected"):
+        B.body_to_motion(c.upper[1:], c.lower, b)
 
 
 def test_body_tpose_is_a_standing_t_pose_facing_plus_z():

@@ -161,21 +161,33 @@ def motion_to_body(motion: Motion, map_name: Optional[str] = None) -> BodyClip:
 
 
 def body_to_motion(upper: np.ndarray, lower: np.ndarray, template: Motion, *, yaw: Optional[np.ndarray] = None,
-                   floor: bool = True, map_name: Optional[str] = None, name: Optional[str] = None) -> Motion:
+                   root_position: Optional[np.ndarray] = None, floor: bool = True, map_name: Optional[str] = None,
+                   name: Optional[str] = None) -> Motion:
     """Write body exp-maps back onto ``template``'s skeleton (and root path).
 
-    The template supplies the skeleton, the root path (hips translation) and the rotations of joints the
-    body does not have; ``yaw`` (default: the template's own) is restored on the hips; with ``floor`` the
-    root height is then set so the lowest foot touches the floor (paper 000 §3.1). ``upper``/``lower`` must
-    have the template's frame count.
+    Args:
+      upper: (F, 39) and lower: (F, 24) exp-maps (:class:`BodyClip` layout), F = the template's frames.
+      template: supplies the skeleton, the root path and the rotations of joints the body does not have.
+      yaw: (F, 4) hips yaw restored on the result (default: the template's own).
+      root_position: (F, 3) world position of the hips (default: the template's hips position, turned
+        about the vertical axis by ``yaw`` relative to the template's yaw).
+      floor: then set the root height per frame so the lowest foot/toe joint is at height 0
+        (paper 000 §3.1); only the vertical coordinate of the root changes.
+
+    References: Kuriyama et al. 2022, §3.1 (yaw copied back from the content, root height by FK).
     """
     F = template.num_frames
+    for what, arr, ch in (("upper", upper, UPPER_CHANNELS), ("lower", lower, LOWER_CHANNELS)):
+        if np.shape(arr) not in ((F, ch), (F, ch // 3, 3)):
+            raise ValueError(f"body_to_motion: {what} has shape {np.shape(arr)}, expected ({F}, {ch}) "
+                             f"for a template of {F} frames")
     upper = np.asarray(upper, np.float64).reshape(F, len(UPPER), 3)
     lower = np.asarray(lower, np.float64).reshape(F, len(LOWER), 3)
     map_name = map_name or detect_map(template.skeleton)
     if not _is_identity_rig(map_name):
         body_template = retarget_to_body(template, map_name)
-        body = body_to_motion(upper, lower, body_template, yaw=yaw, floor=False, map_name="bandai_namco")
+        body = body_to_motion(upper, lower, body_template, yaw=yaw, root_position=root_position, floor=False,
+                              map_name="bandai_namco")
         out = retarget_from_body(body, template, map_name)
         out = K.floor_contact(out) if floor else out
         return out.replace(name=name or template.name)
@@ -187,6 +199,8 @@ def body_to_motion(upper: np.ndarray, lower: np.ndarray, template: Motion, *, ya
     rot[:, _indices(sk, jm, UPPER)] = R.expmap_to_quat(upper)
     rot[:, _indices(sk, jm, LOWER)] = R.expmap_to_quat(lower)
     out = K.restore_root_yaw(unyawed.replace(rotations=rot), own_yaw if yaw is None else yaw, root=hips)
+    if root_position is not None:
+        out = K.set_root_position(out, root_position, root=hips)
     if floor:
         out = K.floor_contact(out, feet=[jm["joints"][n] for n in FEET])
     return out.replace(name=name or template.name)

@@ -263,6 +263,23 @@ def _set_root_global(motion, r, p, grot, new_global, turn):
     return motion.replace(rotations=R.quat_canonicalize(rot), translations=trans)
 
 
+def set_root_position(motion: Motion, position: np.ndarray, root: str | None = None) -> Motion:
+    """Move the root joint (the hips by default) so its world position is ``position`` (F, 3) per frame.
+
+    Only the root's local translation changes (expressed through a static parent such as ``joint_Root``).
+    """
+    sk = motion.skeleton
+    r, p = _root_and_parent(sk, root)
+    position = np.broadcast_to(np.asarray(position, np.float64), (motion.num_frames, 3))
+    trans = motion.translations.copy()
+    if p < 0:
+        trans[:, r] = position
+    else:
+        grot, gpos = global_transforms(motion)
+        trans[:, r] = R.quat_rotate(R.quat_inv(grot[:, p]), position - gpos[:, p])
+    return motion.replace(translations=trans)
+
+
 # ---------------------------------------------------------------------------------------------------
 # Floor contact
 

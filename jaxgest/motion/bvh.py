@@ -17,13 +17,14 @@ restores each joint's channel layout, so a saved file reloads with the same hier
 
 from __future__ import annotations
 
+import io
 import pathlib
 import re
 
 import numpy as np
 
 from jaxgest.errors import DataError
-from jaxgest.io import write_text_atomic
+from jaxgest.io import atomic_output
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
 
@@ -42,7 +43,7 @@ class _Lines:
     def __init__(self, text: str, name: str):
         self.name = name
         self.items = []
-        for i, raw in enumerate(text.splitlines(), start=1):
+        for i, raw in enumerate(text.removeprefix("\ufeff").splitlines(), start=1):  # drop a UTF-8 BOM
             s = raw.strip()
             if s:
                 self.items.append((i, s))
@@ -67,12 +68,15 @@ class _Lines:
         return self.items[-1][0] if self.items else None
 
 
-def _float(lines: _Lines, line: int, token: str, what: str) -> float:
+def _float(lines: _Lines, line: int, token: str, what: str, finite: bool = True) -> float:
+    """``float(token)`` or a :class:`BVHError` at ``line``; rejects Python-only spellings like ``1_000``."""
     try:
+        if "_" in token:
+            raise ValueError(token)
         v = float(token)
     except ValueError:
         raise lines.error(line, f"cannot parse {what} {token!r} as a number") from None
-    if not np.isfinite(v):
+    if finite and not np.isfinite(v):
         raise lines.error(line, f"non-finite {what} {token!r}")
     return v
 
@@ -85,6 +89,22 @@ def _parse_offset(lines: _Lines) -> np.ndarray:
     if len(parts) != 4:
         raise lines.error(ln, f"OFFSET needs 3 numbers, found {len(parts) - 1}")
     return np.array([_float(lines, ln, p, "OFFSET value") for p in parts[1:]])
+
+
+def _channels_problem(names: tuple, joint: str):
+    """Why a joint's channel list is invalid, or None (3 or 6 known channels, one X/Y/Z rotation each)."""
+    if len(names) not in (3, 6):
+        return f"joint {joint!r} has {len(names)} channels; only 3 or 6 are supported"
+    for c in names:
+        if c not in KNOWN_CHANNELS:
+            return f"unknown channel {c!r} on joint {joint!r}"
+    rot = [c for c in names if c in ROTATION_CHANNELS]
+    if len(rot) != 3 or len(set(rot)) != 3:
+        return f"joint {joint!r} needs one X, Y and Z rotation channel, got {' '.join(names)}"
+    pos = [c for c in names if c in POSITION_CHANNELS]
+    if len(pos) not in (0, 3) or len(set(pos)) != len(pos):
+        return f"joint {joint!r} needs all three position channels or none"
+    return None
 
 
 def _parse_channels(lines: _Lines, joint: str) -> tuple:
@@ -103,15 +123,9 @@ def _parse_channels(lines: _Lines, joint: str) -> tuple:
         raise lines.error(ln, f"joint {joint!r} has {n} channels; only 3 or 6 are supported")
     if len(names) != n:
         raise lines.error(ln, f"CHANNELS says {n} but lists {len(names)} names")
-    for c in names:
-        if c not in KNOWN_CHANNELS:
-            raise lines.error(ln, f"unknown channel {c!r} on joint {joint!r}")
-    rot = [c for c in names if c in ROTATION_CHANNELS]
-    if len(rot) != 3 or len(set(rot)) != 3:
-        raise lines.error(ln, f"joint {joint!r} needs one X, Y and Z rotation channel, got {' '.join(names)}")
-    pos = [c for c in names if c in POSITION_CHANNELS]
-    if len(pos) not in (0, 3) or len(set(pos)) != len(pos):
-        raise lines.error(ln, f"joint {joint!r} needs all three position channels or none")
+    reason = _channels_problem(names, joint)
+    if reason:
+        raise lines.error(ln, reason)
     return names
 
 
@@ -171,16 +185,16 @@ def _parse_motion(lines: _Lines, num_channels: int):
         if s == "}":
             raise lines.error(ln, "unbalanced braces: '}' after the root joint was closed")
         raise lines.error(ln, f"expected MOTION, found {s.split()[0]!r}")
-    ln, s = lines.next("Frames:")
+    frames_line, s = lines.next("Frames:")
     m = re.fullmatch(r"Frames:\s*(\S+)", s, flags=re.IGNORECASE)
     if not m:
-        raise lines.error(ln, "expected 'Frames: <count>'")
+        raise lines.error(frames_line, "expected 'Frames: <count>'")
     try:
         frames = int(m.group(1))
     except ValueError:
-        raise lines.error(ln, f"cannot parse frame count {m.group(1)!r}") from None
+        raise lines.error(frames_line, f"cannot parse frame count {m.group(1)!r}") from None
     if frames <= 0:
-        raise lines.error(ln, f"the file has {frames} frames; at least one is needed")
+        raise lines.error(frames_line, f"the file has {frames} frames; at least one is needed")
     ln, s = lines.next("Frame Time:")
     m = re.fullmatch(r"Frame\s+Time:\s*(\S+)", s, flags=re.IGNORECASE)
     if not m:
@@ -189,30 +203,55 @@ def _parse_motion(lines: _Lines, num_channels: int):
     if frame_time <= 0:
         raise lines.error(ln, f"frame time must be positive, got {m.group(1)}")
     rows = lines.items[lines.pos :]
+    data = _parse_rows(lines, rows, num_channels)
     if len(rows) != frames:
-        at = rows[frames][0] if len(rows) > frames else lines.last_line()
-        raise lines.error(at, f"'Frames: {frames}' but the file has {len(rows)} motion rows")
-    data = np.empty((frames, num_channels), dtype=np.float64)
-    for r, (rln, text) in enumerate(rows):
-        parts = text.split()
-        if len(parts) != num_channels:
-            raise lines.error(rln, f"motion row has {len(parts)} values, expected {num_channels}")
-        try:
-            data[r] = np.array(parts, dtype=np.float64)
-        except ValueError:
-            bad = next(p for p in parts if not _is_float(p))
-            raise lines.error(rln, f"cannot parse motion value {bad!r} as a number") from None
-        if not np.all(np.isfinite(data[r])):
-            raise lines.error(rln, "motion row contains NaN or inf")
+        where = f"lines {rows[0][0]}-{rows[-1][0]}" if rows else "none after 'Frame Time'"
+        raise lines.error(frames_line, f"'Frames: {frames}' but the file has {len(rows)} motion rows ({where})")
+    bad = np.flatnonzero(~np.all(np.isfinite(data), axis=1))
+    if bad.size:
+        raise lines.error(rows[bad[0]][0], "motion row contains NaN or inf")
     return frame_time, data
 
 
-def _is_float(s: str) -> bool:
+def _parse_rows(lines: _Lines, rows: list, num_channels: int) -> np.ndarray:
+    """Motion rows -> (rows, channels) float64, vectorised; on failure finds the first bad line."""
+    if not rows:
+        return np.empty((0, num_channels))
     try:
-        float(s)
-        return True
+        block = "\n".join(s for _, s in rows)
+        data = np.loadtxt(io.StringIO(block), dtype=np.float64, ndmin=2, comments=None)
+        if data.shape == (len(rows), num_channels):
+            return data
     except ValueError:
-        return False
+        pass
+    for rln, text in rows:  # slow path, only for broken files: report the first bad line
+        parts = text.split()
+        if len(parts) != num_channels:
+            raise lines.error(rln, f"motion row has {len(parts)} values, expected {num_channels}")
+        for p in parts:
+            _float(lines, rln, p, "motion value", finite=False)
+    raise lines.error(rows[0][0], "cannot parse the motion rows")  # pragma: no cover (loadtxt/float disagree)
+
+
+def _channel_columns(channels) -> tuple:
+    """Column layout of the motion rows for a per-joint channel list.
+
+    Returns ``(rot_cols (J, 3), orders, pos_joints (n,), pos_cols (n, 3))``: the columns of each joint's
+    rotation channels in channel order, each joint's Euler order (e.g. ``"ZXY"``), the joints with
+    position channels and the columns of their X, Y, Z positions.
+    """
+    rot_cols, orders, pos_joints, pos_cols, col = [], [], [], [], 0
+    for j, chans in enumerate(channels):
+        rk = [col + k for k, c in enumerate(chans) if c in ROTATION_CHANNELS]
+        rot_cols.append(rk)
+        orders.append("".join(c[0] for c in chans if c in ROTATION_CHANNELS))
+        by_axis = {c[0]: col + k for k, c in enumerate(chans) if c in POSITION_CHANNELS}
+        if by_axis:
+            pos_joints.append(j)
+            pos_cols.append([by_axis["X"], by_axis["Y"], by_axis["Z"]])
+        col += len(chans)
+    return (np.array(rot_cols, dtype=np.int64).reshape(-1, 3), orders, np.array(pos_joints, dtype=np.int64),
+            np.array(pos_cols, dtype=np.int64).reshape(-1, 3))
 
 
 def loads(text: str, name: str = "<string>") -> Motion:
@@ -225,26 +264,26 @@ def loads(text: str, name: str = "<string>") -> Motion:
     frame_time, data = _parse_motion(lines, num_channels)
     F, J = data.shape[0], len(names)
     offsets = np.stack(offsets)
+    rot_cols, orders, pos_joints, pos_cols = _channel_columns(channels)
     rotations = np.empty((F, J, 4))
+    for order in sorted(set(orders)):  # one vectorised conversion per Euler order
+        idx = np.array([j for j in range(J) if orders[j] == order])
+        rotations[:, idx] = R.euler_to_quat(data[:, rot_cols[idx]], order)
     translations = np.broadcast_to(offsets, (F, J, 3)).copy()
-    col = 0
-    for j, chans in enumerate(channels):
-        block = data[:, col : col + len(chans)]
-        col += len(chans)
-        rot_idx = [k for k, c in enumerate(chans) if c in ROTATION_CHANNELS]
-        order = "".join(chans[k][0] for k in rot_idx)
-        rotations[:, j] = R.euler_to_quat(block[:, rot_idx], order)
-        pos_idx = [k for k, c in enumerate(chans) if c in POSITION_CHANNELS]
-        if pos_idx:
-            by_axis = {chans[k][0]: k for k in pos_idx}
-            translations[:, j] = block[:, [by_axis["X"], by_axis["Y"], by_axis["Z"]]]
+    if pos_joints.size:
+        translations[:, pos_joints] = data[:, pos_cols]
     skeleton = Skeleton(names=tuple(names), parents=np.array(parents), offsets=offsets, channels=tuple(channels),
                         end_sites=end_sites)
     return Motion(skeleton, rotations, translations, fps=fps_from_frame_time(frame_time), name=_stem(name))
 
 
 def fps_from_frame_time(frame_time: float) -> float:
-    """``1 / frame_time``, snapped to the nearest integer when within 0.01% (``0.0333333`` -> 30.0)."""
+    """``1 / frame_time``, snapped to the nearest integer when within 0.01% (``0.0333333`` -> 30.0).
+
+    Files round the frame time (``0.0333333``, ``3.33333e-02``); snapping keeps ``fps == 30.0`` exact so
+    resampling and window arithmetic downstream do not see a 30.00003 fps clip. Rates further than 0.01%
+    from an integer (29.97, 59.94) are kept as the float ``1 / frame_time``.
+    """
     fps = 1.0 / frame_time
     r = round(fps)
     return float(r) if r > 0 and abs(fps - r) <= 1e-4 * r else fps
@@ -255,7 +294,10 @@ def _stem(name: str) -> str:
 
 
 def load(path) -> Motion:
-    """Read a BVH file strictly; raises :class:`BVHError` naming the file, line and reason."""
+    """Read a BVH file strictly; raises :class:`BVHError` naming the file, line and reason.
+
+    UTF-8 text is expected; other 8-bit text is read as latin-1; NUL bytes mean a binary file.
+    """
     path = pathlib.Path(path)
     try:
         raw = path.read_bytes()
@@ -265,87 +307,110 @@ def load(path) -> Motion:
         raise BVHError(f"{path}: is a directory, not a BVH file") from None
     except OSError as e:
         raise BVHError(f"{path}: cannot read ({e.strerror or e})") from None
+    if b"\x00" in raw:
+        raise BVHError(f"{path}: binary data, not a BVH text file")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
-        if b"\x00" in raw:
-            raise BVHError(f"{path}: binary data, not a BVH text file") from None
         text = raw.decode("latin-1")
     return loads(text, name=str(path))
 
 
-def _fmt(x: float) -> str:
-    s = f"{x:.6f}".rstrip("0").rstrip(".")
-    return "0" if s in ("-0", "") else s
+_TRAILING_ZEROS = re.compile(r"\.?0+(?=[ \n]|$)")  # only ever matches after the decimal point of %.6f
+
+
+def _format_rows(values: np.ndarray) -> str:
+    """Rows of ``%.6f`` numbers joined by spaces/newlines, trailing zeros and ``-0`` removed."""
+    values = np.round(np.asarray(values, dtype=np.float64), 6) + 0.0  # + 0.0 turns -0.0 into 0.0
+    row = " ".join(["%.6f"] * values.shape[1])
+    text = "\n".join(row % tuple(r) for r in values.tolist())
+    return _TRAILING_ZEROS.sub("", text)
+
+
+def _check_writable(motion: Motion) -> None:
+    """Raise :class:`BVHError` when ``motion`` cannot be written as BVH (layout, names, values)."""
+    sk, label = motion.skeleton, motion.name or "motion"
+    J = sk.num_joints
+    if len(sk.channels) != J:
+        raise BVHError(f"{label}: {len(sk.channels)} channel lists for {J} joints")
+    for j, chans in enumerate(sk.channels):
+        reason = _channels_problem(chans, sk.names[j])
+        if reason:
+            raise BVHError(f"{label}: cannot write joint {sk.names[j]!r}: {reason}")
+    for n in sk.names:
+        if not n or n != n.strip() or any(ch in n for ch in "\r\n"):
+            raise BVHError(f"{label}: joint name {n!r} cannot be written to a BVH file")
+    if len(set(sk.names)) != J:
+        raise BVHError(f"{label}: duplicate joint names")
+    roots = np.flatnonzero(sk.parents < 0)
+    if len(roots) != 1 or roots[0] != 0 or np.any(sk.parents[1:] >= np.arange(1, J)):
+        raise BVHError(f"{label}: a BVH needs one root first and every parent before its children")
+    if motion.num_frames < 1:
+        raise BVHError(f"{label}: cannot write a BVH with zero frames")
+    if not (np.all(np.isfinite(motion.rotations)) and np.all(np.isfinite(motion.translations))):
+        raise BVHError(f"{label}: motion contains NaN or inf; refusing to write it")
+    if not (np.isfinite(motion.fps) and motion.fps > 0):
+        raise BVHError(f"{label}: fps must be positive, got {motion.fps}")
 
 
 def dumps(motion: Motion) -> str:
-    """BVH text of ``motion`` with each joint's stored channel layout."""
+    """BVH text of ``motion`` with each joint's stored channel layout and End Sites.
+
+    Rotations are written as Euler angles in each joint's channel order (``quat_to_euler``), translations
+    into position channels where the joint has them (joints without position channels are written with
+    their rest offset only), values with 6 decimals, ``Frame Time`` as ``repr(1 / fps)``.
+    """
+    _check_writable(motion)
     sk = motion.skeleton
-    children = {j: [] for j in range(sk.num_joints)}
+    J = sk.num_joints
+    children = {j: [] for j in range(J)}
     for j, p in enumerate(sk.parents):
         if p >= 0:
             children[int(p)].append(j)
-    out = ["HIERARCHY"]
+    order, out = [], ["HIERARCHY"]
 
     def write(j: int, depth: int):
+        order.append(j)
         ind = "\t" * depth
         out.append(f"{ind}{'ROOT' if sk.parents[j] < 0 else 'JOINT'} {sk.names[j]}")
         out.append(f"{ind}{{")
-        out.append(f"{ind}\tOFFSET {' '.join(_fmt(v) for v in sk.offsets[j])}")
+        out.append(f"{ind}\tOFFSET {_format_rows(sk.offsets[j][None])}")
         out.append(f"{ind}\tCHANNELS {len(sk.channels[j])} {' '.join(sk.channels[j])}")
         for c in children[j]:
             write(c, depth + 1)
         if j in sk.end_sites:
             out.append(f"{ind}\tEnd Site")
             out.append(f"{ind}\t{{")
-            out.append(f"{ind}\t\tOFFSET {' '.join(_fmt(v) for v in np.asarray(sk.end_sites[j]))}")
+            out.append(f"{ind}\t\tOFFSET {_format_rows(np.asarray(sk.end_sites[j]).reshape(1, 3))}")
             out.append(f"{ind}\t}}")
         out.append(f"{ind}}}")
 
-    roots = [j for j in range(sk.num_joints) if sk.parents[j] < 0]
-    if len(roots) != 1:
-        raise BVHError(f"{motion.name or 'motion'}: a BVH file needs exactly one root joint, found {len(roots)}")
-    order = []
-
-    def dfs(j):
-        order.append(j)
-        for c in children[j]:
-            dfs(c)
-
-    dfs(roots[0])
-    if order != list(range(sk.num_joints)):
-        raise ValueError("BVH joints must be in depth-first order (parents before children, subtrees contiguous)")
-    write(roots[0], 0)
+    write(0, 0)
+    if order != list(range(J)):
+        raise BVHError(f"{motion.name or 'motion'}: joints must be in depth-first file order "
+                       "(each subtree contiguous) to be written as BVH")
     F = motion.num_frames
-    if F < 1:
-        raise BVHError(f"{motion.name or 'motion'}: cannot write a BVH with zero frames")
-    if not (np.all(np.isfinite(motion.rotations)) and np.all(np.isfinite(motion.translations))):
-        raise BVHError(f"{motion.name or 'motion'}: motion contains NaN or inf; refusing to write it")
-    cols = []
-    for j, chans in enumerate(sk.channels):
-        rot = [c[0] for c in chans if c in ROTATION_CHANNELS]
-        euler = R.quat_to_euler(motion.rotations[:, j], "".join(rot))
-        by_axis = {"X": 0, "Y": 1, "Z": 2}
-        rk = 0
-        for c in chans:
-            if c in ROTATION_CHANNELS:
-                cols.append(euler[:, rk])
-                rk += 1
-            else:
-                cols.append(motion.translations[:, j, by_axis[c[0]]])
-    data = np.stack(cols, axis=1)
-    out.append("MOTION")
-    out.append(f"Frames: {F}")
-    out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
-    text = "\n".join(out) + "\n"
-    body = "\n".join(" ".join(_fmt(v) for v in row) for row in data)
-    return text + body + "\n"
+    rot_cols, orders, pos_joints, pos_cols = _channel_columns(sk.channels)
+    data = np.empty((F, sum(len(c) for c in sk.channels)))
+    for o in sorted(set(orders)):
+        idx = np.array([j for j in range(J) if orders[j] == o])
+        data[:, rot_cols[idx]] = R.quat_to_euler(motion.rotations[:, idx], o)
+    if pos_joints.size:
+        data[:, pos_cols] = motion.translations[:, pos_joints]
+    out += ["MOTION", f"Frames: {F}", f"Frame Time: {1.0 / motion.fps!r}"]
+    return "\n".join(out) + "\n" + _format_rows(data) + "\n"
 
 
 def save(motion: Motion, path) -> None:
-    """Write ``motion`` to ``path`` atomically (temporary file in the same folder, then rename)."""
+    """Write ``motion`` to ``path`` as UTF-8, atomically (temporary file in the same folder, then ``os.replace``).
+
+    Raises :class:`BVHError` when the output folder does not exist or the motion cannot be written.
+    """
     path = pathlib.Path(path)
     if not path.parent.is_dir():
         raise BVHError(f"{path}: output directory {path.parent} does not exist")
-    write_text_atomic(path, dumps(motion))
+    if path.is_dir():
+        raise BVHError(f"{path}: is a directory; give a file name")
+    text = dumps(motion)
+    with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
+        f.write(text)

@@ -31,6 +31,7 @@ HOP_S = 0.0125
 FMIN = 20.0
 FMAX = 7600.0
 LOG_FLOOR = 1e-5
+LOUDNESS_DBFS = -20.0  # RMS level of loudness-normalised audio (dB relative to full scale)
 
 
 def load_audio(path, sr: Optional[int] = None) -> tuple[np.ndarray, int]:
@@ -61,6 +62,19 @@ def _check_samples(y: np.ndarray, name: str) -> None:
         raise AudioError(f"{name}: audio contains NaN or inf samples")
 
 
+def normalize_loudness(y: np.ndarray, target_dbfs: float = LOUDNESS_DBFS) -> np.ndarray:
+    """Scale samples so their RMS level is ``target_dbfs`` dB full scale; silence is returned unchanged.
+
+    The authors' data pipeline normalises the loudness of every recording before feature extraction
+    (SPEC §4); a plain RMS gain is used here (no perceptual weighting). References: SPEC §4.
+    """
+    y = np.asarray(y, np.float32)
+    rms = float(np.sqrt(np.mean(np.square(y, dtype=np.float64)))) if y.size else 0.0
+    if rms < 1e-8:
+        return y
+    return (y * (10.0 ** (target_dbfs / 20.0) / rms)).astype(np.float32)
+
+
 def log_mel_energy(y: np.ndarray, sr: int) -> tuple[np.ndarray, float]:
     """Log-mel + log-energy frames ``(T, 81)`` at the STFT hop, and the hop in seconds."""
     import librosa
@@ -79,11 +93,13 @@ def log_mel_energy(y: np.ndarray, sr: int) -> tuple[np.ndarray, float]:
 
 
 def speech_features(wav_path_or_array: Union[str, pathlib.Path, np.ndarray], sr: Optional[int] = None,
-                    fps: float = 60.0) -> np.ndarray:
+                    fps: float = 60.0, *, loudness: bool = False) -> np.ndarray:
     """Speech features ``(F, 81)`` at ``fps`` frames per second (``F = round(duration * fps)``, >= 1).
 
     ``wav_path_or_array``: a path (``sr`` then optionally resamples) or a 1-D/2-D sample array (``sr``
-    required; 2-D arrays are ``(samples, channels)`` and mixed down).
+    required; 2-D arrays are ``(samples, channels)`` and mixed down). ``loudness=True`` first scales the
+    audio to :data:`LOUDNESS_DBFS` RMS (:func:`normalize_loudness`).
+    References: Ghorbani et al. 2023, §3.1, §4.1.
     """
     if isinstance(wav_path_or_array, (str, pathlib.Path)):
         y, sr = load_audio(wav_path_or_array, sr)
@@ -98,6 +114,8 @@ def speech_features(wav_path_or_array: Union[str, pathlib.Path, np.ndarray], sr:
         _check_samples(y, name)
     if fps <= 0:
         raise AudioError(f"{name}: frame rate must be positive, got {fps}")
+    if loudness:
+        y = normalize_loudness(y)
     feats, hop_s = log_mel_energy(y, int(sr))
     duration = len(y) / float(sr)
     frames = max(1, int(round(duration * fps)))
@@ -126,14 +144,33 @@ class FeatureStats:
     def normalise(self, x: np.ndarray) -> np.ndarray:
         return ((np.asarray(x) - self.mean) / self.std).astype(np.float32)
 
+    def denormalise(self, x: np.ndarray) -> np.ndarray:
+        return (np.asarray(x) * self.std + self.mean).astype(np.float32)
+
     def save(self, path) -> None:
+        """JSON (any suffix but ``.npz``) or NumPy ``.npz`` with arrays ``mean`` and ``std``."""
+        path = pathlib.Path(path)
+        if path.suffix == ".npz":
+            from jaxgest.io import atomic_output
+
+            with atomic_output(path) as tmp:
+                with open(tmp, "wb") as f:  # a file object: np.savez would append ".npz" to a name
+                    np.savez(f, mean=self.mean, std=self.std)
+            return
         write_text_atomic(path, json.dumps({"mean": self.mean.tolist(), "std": self.std.tolist()}) + "\n")
 
     @classmethod
     def load(cls, path) -> "FeatureStats":
         path = pathlib.Path(path)
         try:
-            d = json.loads(path.read_text())
-            return cls(np.asarray(d["mean"]), np.asarray(d["std"]))
+            if path.suffix == ".npz":
+                with np.load(path) as d:
+                    mean, std = np.asarray(d["mean"]), np.asarray(d["std"])
+            else:
+                d = json.loads(path.read_text())
+                mean, std = np.asarray(d["mean"]), np.asarray(d["std"])
+            if mean.shape != (FEATURE_DIM,) or std.shape != (FEATURE_DIM,) or not np.all(std > 0):
+                raise ValueError(f"expected mean/std of shape ({FEATURE_DIM},) with std > 0")
+            return cls(mean, std)
         except (OSError, ValueError, KeyError) as e:
             raise CheckpointError(f"{path}: missing or unreadable speech statistics ({e})") from None

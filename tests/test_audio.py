@@ -1,0 +1,132 @@
+"""Speech features (jaxgest.audio): shapes at the motion rate, spectral content, robustness, clear errors."""
+
+from __future__ import annotations
+
+import json
+
+import librosa
+import numpy as np
+import pytest
+import soundfile as sf
+
+from jaxgest import audio
+from jaxgest.errors import AudioError, CheckpointError
+
+SR = 16000
+
+
+def tone(freq=1000.0, seconds=1.0, sr=SR, amp=0.5):
+    t = np.arange(int(seconds * sr)) / sr
+    return (amp * np.sin(2 * np.pi * freq * t)).astype(np.float32)
+
+
+def test_real_zeggs_wav(zeggs_dir):
+    path = zeggs_dir / "067_Speech_2_x_1_0.wav"
+    info = sf.info(str(path))
+    feats = audio.speech_features(path, fps=60)
+    assert feats.shape == (int(round(info.frames / info.samplerate * 60)), audio.FEATURE_DIM)
+    assert feats.dtype == np.float32 and np.all(np.isfinite(feats))
+    # Speech varies: energy spans a wide range and the log-mel channels are not constant.
+    assert np.ptp(feats[:, -1]) > 5.0
+    assert np.all(feats[:, :80].std(axis=0) > 0.1)
+    # 30 fps gives half the frames of the same audio.
+    assert audio.speech_features(path, fps=30).shape[0] == int(round(info.frames / info.samplerate * 30))
+
+
+def test_tone_peaks_in_its_mel_band():
+    feats = audio.speech_features(tone(1000.0), sr=SR, fps=60)
+    assert feats.shape == (60, 81)
+    centres = librosa.mel_frequencies(n_mels=audio.N_MELS + 2, fmin=audio.FMIN, fmax=audio.FMAX)[1:-1]
+    band = int(np.argmax(feats[30, :80]))
+    assert abs(centres[band] - 1000.0) < 80.0
+
+
+def test_energy_follows_loudness():
+    y = np.concatenate([tone(440, 0.5, amp=0.01), tone(440, 0.5, amp=0.5)])
+    e = audio.speech_features(y, sr=SR, fps=60)[:, -1]
+    # 34 dB louder -> log energy up by 2 * ln(50) ~ 7.8
+    assert e[45] - e[15] == pytest.approx(2 * np.log(50.0), abs=0.3)
+
+
+@pytest.mark.parametrize("y", [np.zeros(SR, np.float32), np.full(SR, 0.3, np.float32),
+                               np.zeros(10, np.float32), np.ones(3, np.float32)], ids=["silence", "dc", "short", "tiny"])
+def test_degenerate_audio_is_finite(y):
+    feats = audio.speech_features(y, sr=SR, fps=60)
+    assert feats.shape == (max(1, int(round(len(y) / SR * 60))), 81)
+    assert np.all(np.isfinite(feats))
+
+
+def test_flac_stereo_44k(tmp_path):
+    mono = tone(300.0, 1.0, sr=44100)
+    stereo = np.stack([mono, 0.5 * mono], axis=1)
+    path = tmp_path / "speech.flac"
+    sf.write(str(path), stereo, 44100, subtype="PCM_24")
+    y, sr = audio.load_audio(path)
+    assert sr == 44100 and y.ndim == 1 and len(y) == 44100
+    np.testing.assert_allclose(y, 0.75 * mono, atol=1e-5)  # channels averaged (24-bit FLAC)
+    y16, sr16 = audio.load_audio(path, sr=16000)
+    assert sr16 == 16000 and len(y16) == 16000 and y16.dtype == np.float32
+    from_file = audio.speech_features(path, fps=60)
+    from_array = audio.speech_features(stereo, sr=44100, fps=60)
+    assert from_file.shape == (60, 81)
+    loud = from_array > np.log(audio.LOG_FLOOR) + 4  # quantisation noise only matters near the floor
+    np.testing.assert_allclose(from_file[loud], from_array[loud], atol=0.05)
+    # Resampled to 16 kHz first: the tone lands in the same band.
+    assert np.argmax(audio.speech_features(path, sr=16000)[30, :80]) == np.argmax(from_file[30, :80])
+
+
+def test_loudness_normalisation():
+    y = tone(500.0)
+    z = audio.normalize_loudness(y)
+    assert 20 * np.log10(np.sqrt(np.mean(z.astype(np.float64) ** 2))) == pytest.approx(audio.LOUDNESS_DBFS, abs=1e-3)
+    np.testing.assert_array_equal(audio.normalize_loudness(np.zeros(100, np.float32)), 0.0)
+    a = audio.speech_features(y, sr=SR, loudness=True)
+    b = audio.speech_features(0.1 * y, sr=SR, loudness=True)
+    np.testing.assert_allclose(a, b, atol=1e-3)
+
+
+def test_errors_name_the_file(tmp_path):
+    bad = tmp_path / "garbage.wav"
+    bad.write_bytes(b"not a wav file at all")
+    with pytest.raises(AudioError, match="garbage.wav"):
+        audio.speech_features(bad)
+    with pytest.raises(AudioError, match="missing.wav"):
+        audio.load_audio(tmp_path / "missing.wav")
+    nan = tmp_path / "nan.wav"
+    y = tone()
+    y[100] = np.nan
+    sf.write(str(nan), y, SR, subtype="FLOAT")
+    with pytest.raises(AudioError, match="nan.wav.*NaN"):
+        audio.speech_features(nan)
+    empty = tmp_path / "empty.wav"
+    sf.write(str(empty), np.zeros(0, np.float32), SR)
+    with pytest.raises(AudioError, match="empty.wav.*empty"):
+        audio.load_audio(empty)
+    with pytest.raises(AudioError, match="inf"):
+        audio.speech_features(np.array([0.0, np.inf], np.float32), sr=SR)
+    with pytest.raises(AudioError, match="empty"):
+        audio.speech_features(np.zeros(0, np.float32), sr=SR)
+    with pytest.raises(AudioError, match="sample rate"):
+        audio.speech_features(y)
+
+
+def test_feature_stats_roundtrip(tmp_path):
+    rng = np.random.default_rng(0)
+    feats = [rng.normal(3.0, 2.0, (50, 81)), rng.normal(3.0, 2.0, (70, 81))]
+    feats[0][:, 5] = 1.0  # constant channel: std floored, no division by zero
+    feats[1][:, 5] = 1.0
+    stats = audio.FeatureStats.fit(feats)
+    z = stats.normalise(np.concatenate(feats))
+    assert np.all(np.isfinite(z))
+    np.testing.assert_allclose(z.mean(0), 0.0, atol=1e-5)
+    np.testing.assert_allclose(np.delete(z.std(0), 5), 1.0, atol=1e-4)
+    np.testing.assert_allclose(stats.denormalise(z), np.concatenate(feats), atol=1e-4)
+    for name in ("speech_stats.json", "speech_stats.npz"):
+        stats.save(tmp_path / name)
+        back = audio.FeatureStats.load(tmp_path / name)
+        np.testing.assert_array_equal(back.mean, stats.mean)
+        np.testing.assert_array_equal(back.std, stats.std)
+    assert set(json.loads((tmp_path / "speech_stats.json").read_text())) == {"mean", "std"}
+    (tmp_path / "broken.json").write_text('{"mean": [1, 2]}')
+    with pytest.raises(CheckpointError, match="broken.json"):
+        audio.FeatureStats.load(tmp_path / "broken.json")

@@ -37,7 +37,8 @@ UPPER = ("Hips", "Spine", "Chest", "Neck", "Head", "Shoulder_L", "UpperArm_L", "
 LOWER = ("UpperLeg_L", "LowerLeg_L", "Foot_L", "Toes_L", "UpperLeg_R", "LowerLeg_R", "Foot_R", "Toes_R")
 BODY = UPPER + LOWER
 HANDS = ("Hand_L", "Hand_R")
-ARMS = ("Shoulder_L", "UpperArm_L", "LowerArm_L", "Hand_L", "Shoulder_R", "UpperArm_R", "LowerArm_R", "Hand_R")
+ARMS = ("Shoulder_L", "UpperArm_L", "LowerArm_L", "Hand_L",
+        "Shoulder_R", "UpperArm_R", "LowerArm_R", "Hand_R")
 FEET = ("Foot_L", "Toes_L", "Foot_R", "Toes_R")
 UPPER_CHANNELS = 3 * len(UPPER)  # 39
 LOWER_CHANNELS = 3 * len(LOWER)  # 24
@@ -80,7 +81,8 @@ def body_skeleton() -> Skeleton:
     s = load_map("bandai_namco")["body_skeleton"]
     names = tuple(s["names"])
     ends = {names.index(k): np.asarray(v, np.float64) for k, v in s["end_sites"].items()}
-    return Skeleton(names=names, parents=np.asarray(s["parents"]), offsets=np.asarray(s["offsets"], np.float64),
+    return Skeleton(names=names, parents=np.asarray(s["parents"]),
+                    offsets=np.asarray(s["offsets"], np.float64),
                     end_sites=ends, up_axis=int(s["up_axis"]))
 
 
@@ -157,12 +159,13 @@ def motion_to_body(motion: Motion, map_name: Optional[str] = None) -> BodyClip:
     up = R.quat_to_expmap(unyawed.rotations[:, _indices(sk, jm, UPPER)])
     lo = R.quat_to_expmap(unyawed.rotations[:, _indices(sk, jm, LOWER)])
     F = motion.num_frames
-    return BodyClip(up.reshape(F, UPPER_CHANNELS), lo.reshape(F, LOWER_CHANNELS), yaw, root_position, motion.fps)
+    return BodyClip(up.reshape(F, UPPER_CHANNELS), lo.reshape(F, LOWER_CHANNELS), yaw, root_position,
+                    motion.fps)
 
 
-def body_to_motion(upper: np.ndarray, lower: np.ndarray, template: Motion, *, yaw: Optional[np.ndarray] = None,
-                   root_position: Optional[np.ndarray] = None, floor: bool = True, map_name: Optional[str] = None,
-                   name: Optional[str] = None) -> Motion:
+def body_to_motion(upper: np.ndarray, lower: np.ndarray, template: Motion, *,
+                   yaw: Optional[np.ndarray] = None, root_position: Optional[np.ndarray] = None,
+                   floor: bool = True, map_name: Optional[str] = None, name: Optional[str] = None) -> Motion:
     """Write body exp-maps back onto ``template``'s skeleton (and root path).
 
     Args:

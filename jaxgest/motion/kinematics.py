@@ -142,7 +142,7 @@ def mirror_frames(skeleton: Skeleton, axis: int = 0) -> np.ndarray:
     return frames
 
 
-def mirror(motion: Motion, axis: int = 0) -> Motion:
+def mirror(motion: Motion, axis: int = 0, keep_rig_offsets: bool = True) -> Motion:
     """Mirror a motion about the sagittal plane (world normal ``axis``, X by default), swapping L/R joints.
 
     With ``S`` the world reflection and ``M_j`` the per-joint frame reflections of :func:`mirror_frames`,
@@ -150,7 +150,22 @@ def mirror(motion: Motion, axis: int = 0) -> Motion:
     i.e. local rotations ``q'_j = M_parent q_perm(j) M_j`` and local translations
     ``t'_j = M_parent t_perm(j)``. On a symmetric rig the mirrored local translations equal the rest
     offsets, so the mirror of a valid pose is a valid pose in the rig's own joint frames. Applying it
-    twice is the identity (to rounding).
+    twice is the identity (to rounding). L/R pairs come from joint names
+    (:func:`jaxgest.motion.skeleton.mirror_pairs`).
+
+    Bone lengths: a rig is rarely exactly symmetric. With ``keep_rig_offsets`` (default) joints without
+    BVH position channels keep their own local translations (the rig's bone lengths), so the result is a
+    valid pose of the rig that survives saving; world positions are then the reflection up to the rig's
+    L/R asymmetry (ZEGGS: up to 3.6 cm at the fingertips; its left and right arm bones differ in length).
+    Joints with position channels (the root; every joint of Bandai-Namco) are always mirrored exactly, so
+    on Bandai-Namco world positions are reflected to rounding (its rest skeleton is itself symmetric to
+    0.05 cm: ``LowerLeg_R`` has z = -0.04). With ``keep_rig_offsets=False`` world positions are reflected
+    exactly on any rig, with local translations that may leave the rig's offsets.
+
+    Args:
+      motion: any Motion.
+      axis: world axis normal to the sagittal plane (0 = X, the left-right axis of both datasets).
+      keep_rig_offsets: see above.
     """
     sk = motion.skeleton
     perm = mirror_pairs(sk)
@@ -163,7 +178,11 @@ def mirror(motion: Motion, axis: int = 0) -> Motion:
         p = sk.parents[j]
         mp = world if p < 0 else frames[p]
         new_m[:, j] = mp @ mats[:, perm[j]] @ frames[j]
-        new_t[:, j] = motion.translations[:, perm[j]] @ mp.T
+        has_position = any(c.endswith("position") for c in sk.channels[j])
+        if keep_rig_offsets and not has_position:
+            new_t[:, j] = motion.translations[:, j]
+        else:
+            new_t[:, j] = motion.translations[:, perm[j]] @ mp.T
     return motion.replace(rotations=R.matrix_to_quat(new_m), translations=new_t)
 
 

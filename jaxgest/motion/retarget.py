@@ -70,7 +70,7 @@ def _unit(v):
 
 
 def _chain_offset(path, rot, trans):
-    """Offset (F, 3) of ``path[-1]`` in the frame of the joint before ``path[0]``, through ``rot``/``trans``."""
+    """Offset (F, 3) of ``path[-1]`` in the frame of the joint before ``path[0]`` (via ``rot``, ``trans``)."""
     v = trans[:, path[-1]]
     for i in reversed(path[:-1]):
         v = trans[:, i] + R.quat_rotate(rot[:, i], v)

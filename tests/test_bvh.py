@@ -206,6 +206,15 @@ def test_first_bad_motion_row_is_reported(tmp_path):
         bvh.loads(text)
 
 
+def test_absurdly_deep_hierarchy_is_a_bvherror_not_a_crash():
+    depth = 5000
+    text = "HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n"
+    text += "".join(f"JOINT j{k}\n{{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n" for k in range(depth))
+    text += "}\n" * (depth + 1) + "MOTION\nFrames: 1\nFrame Time: 0.1\n" + " ".join(["0"] * 3 * (depth + 1))
+    with pytest.raises(BVHError, match="nested too deeply"):
+        bvh.loads(text, name="deep.bvh")
+
+
 def test_unreadable_files_name_the_file(tmp_path):
     for text in ["", "\n\n", " \r\n\t\n"]:
         with pytest.raises(BVHError, match=re.escape(f"{tmp_path / 'e.bvh'}: empty file")):
@@ -258,6 +267,10 @@ def test_motion_built_in_code_with_default_channels_saves(tmp_path):
     assert quat_close(m2.rotations, m.rotations, 1e-5)
     np.testing.assert_allclose(numpy_fk(m2), numpy_fk(m), atol=1e-3)
     assert "Frame Time: 0.016666666666666666" in p.read_text()
+    bvh.save(m.replace(rotations=2.5 * m.rotations), p)  # quaternions are normalised on writing
+    assert quat_close(bvh.load(p).rotations, m.rotations, 1e-5)
+    with pytest.raises(BVHError, match="zero-length quaternions"):
+        bvh.save(m.replace(rotations=0 * m.rotations), p)
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -13,6 +13,10 @@ Rotations become local unit quaternions (w, x, y, z) in float64 (``R = R_a0 R_a1
 translations are the position channels where a joint has them, otherwise its rest offset. The writer
 restores each joint's channel layout, so a saved file reloads with the same hierarchy, rotations within
 1e-5 rad and world positions within 1e-3 cm.
+
+Speed: motion rows are parsed in one vectorised pass (``np.loadtxt``) and Euler angles are converted once
+per distinct order; only a broken file falls back to a line-by-line scan that names the first bad line.
+The 174 Bandai-Namco files load in about 2 s on one core.
 """
 
 from __future__ import annotations
@@ -259,7 +263,10 @@ def loads(text: str, name: str = "<string>") -> Motion:
     lines = _Lines(text, name)
     if not lines.items:
         raise BVHError(f"{name}: empty file")
-    names, parents, offsets, channels, end_sites = _parse_hierarchy(lines)
+    try:
+        names, parents, offsets, channels, end_sites = _parse_hierarchy(lines)
+    except RecursionError:
+        raise BVHError(f"{name}: joint hierarchy nested too deeply to read") from None
     num_channels = sum(len(c) for c in channels)
     frame_time, data = _parse_motion(lines, num_channels)
     F, J = data.shape[0], len(names)
@@ -349,6 +356,8 @@ def _check_writable(motion: Motion) -> None:
         raise BVHError(f"{label}: cannot write a BVH with zero frames")
     if not (np.all(np.isfinite(motion.rotations)) and np.all(np.isfinite(motion.translations))):
         raise BVHError(f"{label}: motion contains NaN or inf; refusing to write it")
+    if np.any(np.linalg.norm(motion.rotations, axis=-1) < 1e-6):
+        raise BVHError(f"{label}: motion contains zero-length quaternions; refusing to write it")
     if not (np.isfinite(motion.fps) and motion.fps > 0):
         raise BVHError(f"{label}: fps must be positive, got {motion.fps}")
 
@@ -385,7 +394,10 @@ def dumps(motion: Motion) -> str:
             out.append(f"{ind}\t}}")
         out.append(f"{ind}}}")
 
-    write(0, 0)
+    try:
+        write(0, 0)
+    except RecursionError:
+        raise BVHError(f"{motion.name or 'motion'}: joint hierarchy nested too deeply to write") from None
     if order != list(range(J)):
         raise BVHError(f"{motion.name or 'motion'}: joints must be in depth-first file order "
                        "(each subtree contiguous) to be written as BVH")

@@ -140,9 +140,7 @@ def _group_norm(diff: np.ndarray, joint_dims: int | None) -> np.ndarray:
     return np.linalg.norm(per_joint, axis=-1).sum(axis=-1)
 
 
-def style_error_components(
-    transfer_vel, style_vel, window: int, *, joint_dims: int | None = 3
-) -> np.ndarray:
+def style_error_components(transfer_vel, style_vel, window: int, *, joint_dims: int | None = 3) -> np.ndarray:
     """E_k^style = min_j D_mean(rho^x_k, rho^s_j) + D_std(rho^x_k, rho^s_j) for every transfer window k; ``(K,)``.
 
     D_mean / D_std: the sum over joints of per-joint L2 norms of the difference of the window means / stds
@@ -158,9 +156,7 @@ def style_error_components(
     return d.min(axis=1)
 
 
-def style_error(
-    transfer_vel, style_vel, window: int, *, trim: int = 0, joint_dims: int | None = 3
-) -> dict:
+def style_error(transfer_vel, style_vel, window: int, *, trim: int = 0, joint_dims: int | None = 3) -> dict:
     """Style error of a transfer: ``{"mean", "worst", "w25"}`` of eq. 15 over the windows of eq. 16.
 
     transfer_vel: (Fx, C), style_vel: (Fs, C) per-frame features -- the velocities (per second, e.g. m/s) of

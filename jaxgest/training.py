@@ -109,6 +109,10 @@ class Checkpointer:
         self.kind = kind
         self.ignore = tuple(ignore)
         self.meta = _normalise({"kind": kind, "config": dict(config), "skeleton": skeleton})
+        if read_only:  # orbax logs three warnings about read-only options it adjusts; they are expected
+            import logging
+
+            logging.getLogger("absl").setLevel(logging.ERROR)
         if read_only and not self.directory.is_dir():
             raise CheckpointError(f"{self.workdir}: no checkpoint found (missing {self.directory.name}/)")
         if not read_only:

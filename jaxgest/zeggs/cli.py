@@ -1,0 +1,119 @@
+"""``jaxgest zeggs train | generate | pca | evaluate`` (SPEC §6)."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+from jaxgest.errors import JaxgestError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("zeggs", help="ZeroEGGS: speech-driven gestures with zero-shot style")
+    sub = p.add_subparsers(dest="zeggs_command", metavar="COMMAND")
+    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+
+    t = sub.add_parser("train", help="train (or resume) on a folder of BVH + WAV clips")
+    t.add_argument("--data", required=True, help="folder: ZEGGS layout or manifest.csv with audio")
+    t.add_argument("--workdir", required=True, help="run folder (checkpoints, stats, metrics.jsonl)")
+    t.add_argument("--preset", default="tiny", choices=("tiny", "paper"))
+    t.add_argument("--steps", type=int, default=None, help="total training steps (default: tiny 300)")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
+    t.set_defaults(func=_train)
+
+    g = sub.add_parser("generate", help="gestures for a speech file in the style of example clip(s)")
+    g.add_argument("--workdir", required=True)
+    g.add_argument("--audio", required=True, help="WAV/FLAC speech (any sample rate or channel count)")
+    g.add_argument("--style", action="append", required=True, help="style example BVH (repeat to blend)")
+    g.add_argument("--weights", default=None, help="blend weights, comma-separated, one per --style")
+    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--temperature", type=float, default=1.0)
+    g.add_argument("--pca-edit", action="append", default=[], metavar="K=DELTA",
+                   help="move the style embedding along PCA component K by DELTA standard deviations")
+    g.add_argument("--out", required=True, help="output BVH (on the first style clip's skeleton)")
+    g.set_defaults(func=_generate)
+
+    c = sub.add_parser("pca", help="fit a PCA of style embeddings (for --pca-edit)")
+    c.add_argument("--workdir", required=True)
+    c.add_argument("--data", required=True)
+    c.add_argument("--window", type=float, default=4.0, help="style window in seconds")
+    c.set_defaults(func=_pca)
+
+    e = sub.add_parser("evaluate", help="style probe, beat alignment vs shuffled control, Fréchet distance")
+    e.add_argument("--workdir", required=True)
+    e.add_argument("--data", required=True)
+    e.add_argument("--json", required=True, metavar="OUT.json")
+    e.add_argument("--max-clips", type=int, default=None)
+    e.add_argument("--seed", type=int, default=0)
+    e.set_defaults(func=_evaluate)
+
+
+def _train(args) -> int:
+    from jaxgest.zeggs.train import train
+
+    r = train(args.data, args.workdir, preset=args.preset, steps=args.steps, seed=args.seed, devices=args.devices)
+    final = r["final"]
+    print(f"zeggs: trained {r['steps']} steps (resumed from {r['start_step']}) on {r['devices']} device(s) in "
+          f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}; workdir {args.workdir}")
+    return 0
+
+
+def _parse_weights(text):
+    if text is None:
+        return None
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise JaxgestError(f"--weights {text!r}: expected comma-separated numbers, e.g. 0.5,0.5") from None
+
+
+def _generate(args) -> int:
+    from jaxgest.io import check_output_path
+    from jaxgest.motion import bvh
+    from jaxgest.zeggs.inference import load_model
+    from jaxgest.zeggs.pca import parse_edits
+
+    out = check_output_path(args.out)
+    weights = _parse_weights(args.weights)
+    edits = parse_edits(args.pca_edit)
+    styles = [bvh.load(s) for s in args.style]
+    if not pathlib.Path(args.audio).is_file():
+        raise JaxgestError(f"{args.audio}: no such audio file")
+    model = load_model(args.workdir)
+    motion = model.generate(args.audio, styles, weights=weights, seed=args.seed, temperature=args.temperature,
+                            pca_edits=edits, name=out.stem)
+    bvh.save(motion, out)
+    print(f"zeggs: wrote {out} ({motion.num_frames} frames at {motion.fps:g} fps, "
+          f"{motion.skeleton.num_joints} joints)")
+    return 0
+
+
+def _pca(args) -> int:
+    import numpy as np
+
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.zeggs.evaluate import style_windows
+    from jaxgest.zeggs.inference import load_model
+    from jaxgest.zeggs.pca import fit_pca
+
+    model = load_model(args.workdir)
+    clips = load_folder(args.data)
+    emb = np.concatenate([style_windows(model, c, args.window) for c in clips])
+    pca = fit_pca(emb)
+    pca.save(pathlib.Path(args.workdir) / "pca.json")
+    ev = ", ".join(f"{100 * r:.1f}%" for r in pca.explained_variance_ratio[:5])
+    print(f"zeggs pca: {len(emb)} style windows from {len(clips)} clips; explained variance of the first "
+          f"components: {ev}; saved {pathlib.Path(args.workdir) / 'pca.json'}")
+    return 0
+
+
+def _evaluate(args) -> int:
+    from jaxgest.io import check_output_path, write_text_atomic
+    from jaxgest.zeggs.evaluate import evaluate, markdown
+
+    out = check_output_path(args.json)
+    result = evaluate(args.workdir, args.data, seed=args.seed, max_clips=args.max_clips)
+    write_text_atomic(out, json.dumps(result, indent=2) + "\n")
+    print(markdown(result))
+    return 0

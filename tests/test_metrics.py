@@ -168,6 +168,17 @@ def test_dtw_not_worse_than_fastdtw():
         assert cost <= path_distances(a, b, np.asarray(approx_path)).sum() + 1e-9
 
 
+def test_dtw_equals_fastdtw_with_full_radius():
+    fastdtw = pytest.importorskip("fastdtw")
+    rng = np.random.default_rng(7)
+    for n, m in [(30, 25), (12, 40), (1, 9)]:
+        a, b = _walk(rng, n, 6), _walk(rng, m, 6)
+        exact, path = fastdtw.fastdtw(a, b, radius=max(n, m), dist=2)  # the window covers every cell
+        cost, _ = dtw(a, b)
+        assert cost == pytest.approx(exact, rel=1e-12)
+        assert path_distances(a, b, np.asarray(path)).sum() == pytest.approx(cost, rel=1e-12)
+
+
 @pytest.mark.parametrize(
     "a, b",
     [

@@ -1,0 +1,210 @@
+"""ZeroEGGS gesture generator: hidden-state initializer, recurrent decoder, character-state update.
+
+Per frame t >= 1 the recurrent decoder reads ``[y_{t-1} (normalised pose state), target facing in the
+root frame, s_t (speech embedding), e (style)]``, applies a linear layer with ELU, feeds
+``[that, input]`` to two stacked GRU layers and a linear output layer that predicts the normalised pose
+y_t. The "Update Character State" block denormalises y_t and integrates the predicted root velocities
+into the root transform (position + yaw quaternion); y_t is fed back (no teacher forcing). Frame 0 is the
+given initial pose. The hidden-state initializer (3 linear layers, ELU after the first two, as in the
+authors' code) maps ``[y_0, facing in the root frame, e]`` to the hidden states of all GRU layers.
+
+:class:`RecurrentDecoder` is one step (an ``nn.RNNCellBase`` whose carry is ``(hidden states, pose state,
+root position, root rotation)``); :class:`Generator` runs it with ``nn.scan`` so one compiled loop covers
+the sequence; :func:`generate_loop_reference` runs the same step in a Python loop (tests).
+
+The GRU follows PyTorch's ``nn.GRU`` equations and parameter count (input and hidden biases for the three
+gates). The target-facing input is the unit facing direction rotated into the current root frame, not
+normalised (it is already O(1)); the authors normalise it with the other inputs.
+
+References: Ghorbani et al. 2023, §3.3 (Fig. 4) and §4.2; Harvey & Pal 2018 (separate initializer);
+Cho et al. 2014 (GRU).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import chex
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+from jaxgest.motion import rotations as R
+from jaxgest.zeggs.config import ZeggsConfig
+
+Carry = tuple[tuple[jax.Array, ...], jax.Array, jax.Array, jax.Array]
+
+
+class GRULayer(nn.Module):
+    """One GRU step ``(h (batch, H), x (batch, I)) -> h'`` with PyTorch's gate layout (r, z, n).
+
+    References: Cho et al. 2014; PyTorch ``nn.GRU`` (b_hn inside the reset product).
+    """
+
+    features: int
+
+    @nn.compact
+    def __call__(self, h: jax.Array, x: jax.Array) -> jax.Array:
+        H = self.features
+        gi = nn.Dense(3 * H, name="input")(x)
+        gh = nn.Dense(3 * H, name="hidden")(h)
+        r = nn.sigmoid(gi[:, :H] + gh[:, :H])
+        z = nn.sigmoid(gi[:, H:2 * H] + gh[:, H:2 * H])
+        n = jnp.tanh(gi[:, 2 * H:] + r * gh[:, 2 * H:])
+        return (1.0 - z) * n + z * h
+
+
+def update_character_state(pose: jax.Array, root_position: jax.Array, root_rotation: jax.Array, *,
+                           cfg: ZeggsConfig, pose_mean: jax.Array, pose_std: jax.Array):
+    """Integrate the root: denormalise the predicted root velocities and step the root transform.
+
+    pose ``(batch, P)`` normalised prediction of frame t; root_position ``(batch, 3)``, root_rotation
+    ``(batch, 4)`` of frame t-1. Returns the root position and (unit) rotation of frame t:
+    ``q_t = exp(q_{t-1} w_t dt) q_{t-1}``, ``p_t = p_{t-1} + q_t v_t dt`` with ``v_t, w_t`` in the root
+    frame -- the inverse of :func:`jaxgest.zeggs.features.extract_features` (same as ``integrate_root``).
+    References: Ghorbani et al. 2023, §3.3 ("Update Character State").
+    """
+    lay = cfg.layout
+    dt = 1.0 / cfg.fps
+    vel = pose[:, lay.root_velocity] * pose_std[None, lay.root_velocity] + pose_mean[None, lay.root_velocity]
+    ang = pose[:, lay.root_angular_velocity] * pose_std[None, lay.root_angular_velocity] \
+        + pose_mean[None, lay.root_angular_velocity]
+    rot = R.quat_normalize(R.quat_mul(R.expmap_to_quat(R.quat_rotate(root_rotation, ang) * dt), root_rotation))
+    pos = root_position + R.quat_rotate(rot, vel) * dt
+    return pos, rot
+
+
+def local_facing(facing: jax.Array, root_rotation: jax.Array) -> jax.Array:
+    """World target facing direction ``(batch, 3)`` expressed in the root frame (``q^-1 f``)."""
+    return R.quat_rotate(R.quat_inv(root_rotation), facing)
+
+
+class HiddenStateInitializer(nn.Module):
+    """``[y_0, facing, e]`` -> hidden states of every GRU layer (tuple of ``(batch, H)``).
+
+    References: Ghorbani et al. 2023, §3.3, §4.2 (3 linear layers with ELU, hidden size 1024).
+    """
+
+    cfg: ZeggsConfig
+
+    @nn.compact
+    def __call__(self, pose0: jax.Array, facing0: jax.Array, style: jax.Array) -> tuple[jax.Array, ...]:
+        cfg = self.cfg
+        x = jnp.concatenate([pose0, facing0, style], axis=-1)
+        x = nn.elu(nn.Dense(cfg.init_hidden, name="layer0")(x))
+        x = nn.elu(nn.Dense(cfg.init_hidden, name="layer1")(x))
+        h = nn.Dense(cfg.gru_hidden * cfg.gru_layers, name="layer2")(x)
+        return tuple(jnp.split(h, cfg.gru_layers, axis=-1))
+
+
+class RecurrentDecoder(nn.RNNCellBase):
+    """One generator step: ``(carry, (s_t, e_t), (facing, mean, std)) -> (carry', (y_t, p_t, q_t))``.
+
+    carry = ``(hidden states (tuple of (batch, H)), y_{t-1} (batch, P) normalised, root position
+    (batch, 3), root rotation (batch, 4))``.
+    References: Ghorbani et al. 2023, §3.3 (Fig. 4).
+    """
+
+    cfg: ZeggsConfig
+
+    @nn.compact
+    def __call__(self, carry: Carry, inputs: tuple[jax.Array, jax.Array], consts: tuple[jax.Array, ...]):
+        cfg = self.cfg
+        hidden, pose, root_pos, root_rot = carry
+        speech_t, style_t = inputs
+        facing, pose_mean, pose_std = consts
+        x = jnp.concatenate([pose, local_facing(facing, root_rot), speech_t, style_t], axis=-1)
+        h = nn.elu(nn.Dense(cfg.gru_hidden, name="input_layer")(x))
+        h = jnp.concatenate([h, x], axis=-1)
+        new_hidden = []
+        for i in range(cfg.gru_layers):
+            h = GRULayer(cfg.gru_hidden, name=f"gru{i}")(hidden[i], h)
+            new_hidden.append(h)
+        y = nn.Dense(cfg.pose_dim, name="output_layer")(h)
+        pos, rot = update_character_state(y, root_pos, root_rot, cfg=cfg, pose_mean=pose_mean, pose_std=pose_std)
+        return (tuple(new_hidden), y, pos, rot), (y, pos, rot)
+
+    @nn.nowrap
+    def initialize_carry(self, rng, input_shape):  # the hidden-state initializer provides the carry
+        raise NotImplementedError("use HiddenStateInitializer: the carry depends on pose, facing and style")
+
+    @property
+    def num_feature_axes(self) -> int:
+        return 1
+
+
+def _prepare(cfg: ZeggsConfig, pose0, root_position0, root_rotation0, facing, speech, style, pose_mean, pose_std):
+    b, T, _ = speech.shape
+    chex.assert_shape(pose0, (b, cfg.pose_dim))
+    chex.assert_shape(speech, (b, T, cfg.speech_embedding))
+    chex.assert_shape([root_position0, facing], (b, 3))
+    chex.assert_shape(root_rotation0, (b, 4))
+    if style.ndim == 2:
+        style = jnp.broadcast_to(style[:, None], (b, T, style.shape[-1]))
+    chex.assert_shape(style, (b, T, cfg.style_embedding))
+    dtype = pose0.dtype
+    mean = jnp.zeros((cfg.pose_dim,), dtype) if pose_mean is None else jnp.asarray(pose_mean, dtype)
+    std = jnp.ones((cfg.pose_dim,), dtype) if pose_std is None else jnp.asarray(pose_std, dtype)
+    return style, (facing, mean, std)
+
+
+def _stack_outputs(pose0, root_position0, root_rotation0, ys, ps, qs):
+    return {
+        "pose": jnp.concatenate([pose0[:, None], ys], axis=1),
+        "root_position": jnp.concatenate([root_position0[:, None], ps], axis=1),
+        "root_rotation": jnp.concatenate([root_rotation0[:, None], qs], axis=1),
+    }
+
+
+class Generator(nn.Module):
+    """Autoregressive generator over a whole sequence (one ``nn.scan``).
+
+    Inputs (batch b, frames T): ``pose0 (b, P)`` normalised initial pose, ``root_position0 (b, 3)``,
+    ``root_rotation0 (b, 4)``, ``facing (b, 3)`` world target facing, ``speech (b, T, D_S)`` speech
+    embeddings, ``style (b, D_e)`` or ``(b, T, D_e)`` style embeddings, ``pose_mean``/``pose_std (P,)``
+    normalisation of the pose (default identity). Returns ``{"pose": (b, T, P) normalised, frame 0 =
+    pose0, "root_position": (b, T, 3), "root_rotation": (b, T, 4)}``.
+    References: Ghorbani et al. 2023, §3.3.
+    """
+
+    cfg: ZeggsConfig
+
+    def setup(self):
+        self.initializer = HiddenStateInitializer(self.cfg, name="initializer")
+        scan = nn.scan(RecurrentDecoder, variable_broadcast="params", split_rngs={"params": False},
+                       in_axes=(1, nn.broadcast), out_axes=1)
+        self.decoder = scan(self.cfg, name="decoder")
+
+    def initial_carry(self, pose0, root_position0, root_rotation0, facing, style_seq) -> Carry:
+        hidden = self.initializer(pose0, local_facing(facing, root_rotation0), style_seq[:, 0])
+        return hidden, pose0, root_position0, root_rotation0
+
+    def __call__(self, pose0: jax.Array, root_position0: jax.Array, root_rotation0: jax.Array,
+                 facing: jax.Array, speech: jax.Array, style: jax.Array,
+                 pose_mean: Optional[jax.Array] = None, pose_std: Optional[jax.Array] = None) -> dict[str, Any]:
+        style, consts = _prepare(self.cfg, pose0, root_position0, root_rotation0, facing, speech, style,
+                                 pose_mean, pose_std)
+        carry = self.initial_carry(pose0, root_position0, root_rotation0, facing, style)
+        _, (ys, ps, qs) = self.decoder(carry, (speech[:, 1:], style[:, 1:]), consts)
+        out = _stack_outputs(pose0, root_position0, root_rotation0, ys, ps, qs)
+        chex.assert_shape(out["pose"], speech.shape[:2] + (self.cfg.pose_dim,))
+        return out
+
+
+def generate_loop_reference(cfg: ZeggsConfig, params, pose0, root_position0, root_rotation0, facing, speech,
+                            style, pose_mean=None, pose_std=None) -> dict[str, Any]:
+    """The generator as a slow Python loop over frames with the same ``params`` (tests only)."""
+    style, consts = _prepare(cfg, pose0, root_position0, root_rotation0, facing, speech, style,
+                             pose_mean, pose_std)
+    hidden = HiddenStateInitializer(cfg).apply({"params": params["initializer"]}, pose0,
+                                               local_facing(facing, root_rotation0), style[:, 0])
+    carry: Carry = (hidden, pose0, root_position0, root_rotation0)
+    cell = RecurrentDecoder(cfg)
+    ys, ps, qs = [], [], []
+    for t in range(1, speech.shape[1]):
+        carry, (y, p, q) = cell.apply({"params": params["decoder"]}, carry, (speech[:, t], style[:, t]), consts)
+        ys.append(y)
+        ps.append(p)
+        qs.append(q)
+    return _stack_outputs(pose0, root_position0, root_rotation0, jnp.stack(ys, 1), jnp.stack(ps, 1),
+                          jnp.stack(qs, 1))

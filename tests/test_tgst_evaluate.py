@@ -186,6 +186,8 @@ def test_metric_validity_is_table_1_of_the_pairs(data_dir, clips):
     assert table["pairs"] == "inter" and table["num_pairs"] == 12
     rows = table["rows"]
     assert set(rows) == {"content", "style"} and all(set(r) == {"content", "style"} for r in rows.values())
+    md = ev.validity_table(table).splitlines()
+    assert len(md) == 4 and md[2].startswith("| Content |") and md[3].startswith("| Style |")
     # Recompute row "style", column "style" directly from the metric functions.
     expected = []
     for p in ev.make_pairs(clips, "inter"):
@@ -205,39 +207,18 @@ def test_cli_writes_json_and_prints_table(data_dir, tmp_path, monkeypatch, capsy
     parser = argparse.ArgumentParser()
     ev.register_evaluate(parser.add_subparsers())
     out = tmp_path / "eval.json"
-    args = parser.parse_args(
-        [
-            "evaluate",
-            "--workdir",
-            str(tmp_path),
-            "--data",
-            str(data_dir),
-            "--json",
-            str(out),
-            "--pairs",
-            "inter",
-            "--methods",
-            "soft,hard",
-            "--max-pairs",
-            "3",
-        ]
-    )
+    argv = f"evaluate --workdir {tmp_path} --data {data_dir} --json {out} --pairs inter --methods soft,hard"
+    args = parser.parse_args(argv.split() + ["--max-pairs", "3", "--validity"])
     assert args.func(args) == 0
     report = json.loads(out.read_text())
     assert report["num_pairs"] == 3 and set(report["methods"]) == {"soft", "hard"}
     printed = capsys.readouterr().out
     assert "| Soft swap (ours) | 0 | 0 | 0 |" in printed and "Hard swap (19)" in printed
+    assert report["metric_validity"]["pairs"] == "inter" and "| Content |" in printed
+    assert set(report["notes"]) >= {"content", "style", "w25"}
     assert not list(tmp_path.glob(".eval.*"))  # no temporary file left behind
     bad = parser.parse_args(
-        [
-            "evaluate",
-            "--workdir",
-            "w",
-            "--data",
-            str(data_dir),
-            "--json",
-            str(tmp_path / "missing" / "x.json"),
-        ]
+        f"evaluate --workdir w --data {data_dir} --json {tmp_path}/missing/x.json".split()
     )
     with pytest.raises(DataError, match="does not exist"):
         bad.func(bad)

@@ -148,6 +148,15 @@ def test_dtw_lengths_in_one_bucket_share_a_compilation():
     assert dtw_wavefront._cache_size() == before
 
 
+def test_dtw_buckets():
+    from jaxgest.metrics.dtw import _bucket
+
+    sizes = [_bucket(k) for k in range(1, 5000)]
+    assert all(s >= k for k, s in zip(range(1, 5000), sizes))
+    assert all(s <= max(k + 63, 1.5 * k) for k, s in zip(range(1, 5000), sizes))
+    assert sorted(set(sizes)) == [64, 128, 192, 256, 384, 512, 768, 1024, 1536, 2048, 3072, 4096, 6144]
+
+
 def test_dtw_longer_clip_against_reference():
     rng = np.random.default_rng(5)
     a, b = _walk(rng, 150, 6), _walk(rng, 131, 6)

@@ -26,7 +26,23 @@ from jaxgest.errors import DataError
 # Predecessor codes stored by the forward pass.
 _DIAG, _UP, _LEFT = 0, 1, 2
 _STEP = {_DIAG: (1, 1), _UP: (1, 0), _LEFT: (0, 1)}
-_BUCKET = 64  # lengths are padded to a multiple of this so clips of similar length share one compilation
+_BUCKET = 64  # lengths are padded (see _bucket) so clips of similar length share one compilation
+
+
+def _bucket(k: int) -> int:
+    """Padded length of a k-frame sequence: a multiple of 64 up to 256, then the next 2^j or 1.5 * 2^j.
+
+    At most 1.5x (above 256 frames) extra work per axis, and few distinct shapes -- hence few compilations
+    -- over a dataset of clips of many lengths.
+    """
+    if k <= 4 * _BUCKET:
+        return -(-k // _BUCKET) * _BUCKET
+    size = 4 * _BUCKET
+    while True:
+        for candidate in (size, size * 3 // 2, 2 * size):
+            if k <= candidate:
+                return candidate
+        size *= 2
 
 
 def _check_pair(a, b) -> tuple[np.ndarray, np.ndarray]:
@@ -124,7 +140,7 @@ def dtw(a, b) -> tuple[float, np.ndarray]:
     a: (N, C), b: (M, C) (1-D inputs are treated as C = 1). The forward pass is the jit-compiled JAX
     wavefront :func:`dtw_wavefront`, run in float64 (``jax.enable_x64`` locally, whatever the global setting)
     so that costs and tie-breaking agree with the float64 reference :func:`dtw_numpy`; lengths are padded to
-    a multiple of 64 so nearby lengths reuse one compilation. The path is backtracked in NumPy. ``cost`` (a
+    a few bucket sizes (:func:`_bucket`) so nearby lengths reuse one compilation. The path is backtracked in NumPy. ``cost`` (a
     Python float) is the accumulated cost at (N-1, M-1) = the sum of ||a_i - b_j||_2 along the returned path.
     path: (K, 2) int64, max(N, M) <= K <= N + M - 1. Not traceable itself (NumPy backtracking).
 
@@ -134,7 +150,7 @@ def dtw(a, b) -> tuple[float, np.ndarray]:
     a, b = _check_pair(a, b)
     n, m = len(a), len(b)
     pad = lambda x, k: np.concatenate([x, np.zeros((k - len(x), x.shape[1]))]).astype(np.float64)
-    big_n, big_m = (-(-k // _BUCKET) * _BUCKET for k in (n, m))
+    big_n, big_m = _bucket(n), _bucket(m)
     with _float64_scope():  # float64 locally: exact ties break as in the float64 reference
         cost, pred = dtw_wavefront(
             jnp.asarray(pad(a, big_n)),

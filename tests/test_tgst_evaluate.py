@@ -12,6 +12,7 @@ import pytest
 import jaxgest.tgst.api
 from jaxgest import metrics
 from jaxgest.errors import DataError
+from jaxgest.motion import bvh
 from jaxgest.motion.datasets import Clip, load_folder
 from jaxgest.motion.synthetic import write_dataset
 from jaxgest.tgst import evaluate as ev
@@ -232,3 +233,28 @@ def test_short_clips_are_skipped(tmp_path):
     s = report["methods"]["soft"]
     assert report["num_pairs"] == 1 and s["num_skipped"] == 1 and s["content"] is None
     assert "shorter than one window" in report["per_pair"][0]["errors"]["soft"]["skipped"]
+
+
+def test_real_bandai_pairs_and_errors(bandai_dir):
+    from jaxgest.motion.datasets import BANDAI_RE
+
+    names = sorted(p.name for p in bandai_dir.glob("*.bvh"))
+    fake = [Clip(None, m["content"], m["style"], bandai_dir / n) for n in names if (m := BANDAI_RE.match(n))]
+    intra = ev.make_pairs(fake, "intra")
+    assert intra and all(p.content.style == "normal" and p.ground_truth is not None for p in intra)
+    # bow in normal style -> bow in angry style: the rig's hands/arms are found through its joint map (30 fps).
+    c = bvh.load(bandai_dir / "dataset-1_bow_normal_001.bvh")
+    s = bvh.load(bandai_dir / "dataset-1_bow_angry_001.bvh")
+    errs = ev.clip_errors(c, c, s, s)
+    assert errs["content"]["worst"] == 0.0 and errs["gt_style"]["mean"] == errs["style"]["mean"] > 0
+    hands, arms = ev.clip_features(c)
+    assert hands.shape == (c.num_frames, 6) and arms.shape == (c.num_frames, 24)
+    assert 0.3 < np.abs(hands[:, 3:] - hands[:, :3]).max() < 3.0  # hands apart by metres, not centimetres
+
+
+def test_real_zeggs_features(zeggs_dir):
+    m = bvh.load(zeggs_dir / "067_Speech_2_x_1_0.bvh")
+    m = m.replace(rotations=m.rotations[:300], translations=m.translations[:300])
+    hands, arms = ev.clip_features(m)
+    assert hands.shape == (300, 6) and arms.shape == (300, 24)
+    assert np.all(np.isfinite(arms)) and 0.3 < np.abs(hands[:, 3:] - hands[:, :3]).max() < 3.0

@@ -1,0 +1,228 @@
+"""ZeroEGGS networks (paper 001): sizes, KL and annealing, scan == loop, seeds, masking, training step."""
+
+from __future__ import annotations
+
+import json
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxgest.motion import rotations as R
+from jaxgest.zeggs import features as Fe
+from jaxgest.zeggs import losses as L
+from jaxgest.zeggs import steps as S
+from jaxgest.zeggs.api import count_params
+from jaxgest.zeggs.config import config_from_dict, get_config
+from jaxgest.zeggs.generator import generate_loop_reference, update_character_state
+from jaxgest.zeggs.style_encoder import StyleEncoder, sample_style
+
+CFG = get_config("tiny")
+P = CFG.pose_dim
+
+
+def _batch(B=2, T=8, S_=12, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(T, dtype=np.float32)[None, :, None] / T
+    phase = rng.uniform(0, 6, size=(B, 1, P)).astype(np.float32)
+    pose = 0.5 * np.sin(2 * np.pi * t + phase)  # smooth normalised features
+    q = np.zeros((B, T, 4), np.float32)
+    q[..., 0] = 1.0
+    lengths = np.array([S_] + [S_ - 4] * (B - 1))
+    return {
+        "speech": rng.normal(size=(B, T, 81)).astype(np.float32),
+        "pose": pose.astype(np.float32),
+        "root_position": np.zeros((B, T, 3), np.float32),
+        "root_rotation": q,
+        "style": rng.normal(size=(B, S_, P)).astype(np.float32),
+        "style_mask": np.arange(S_)[None] < lengths[:, None],
+        "facing": np.tile(np.array([0.0, 0.0, 1.0], np.float32), (B, 1)),
+    }
+
+
+@pytest.fixture(scope="module")
+def params():
+    return S.init_params(CFG, jax.random.PRNGKey(0))
+
+
+def test_config_json_round_trip():
+    for name in ("tiny", "paper"):
+        cfg = get_config(name)
+        assert config_from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
+    assert get_config("paper").pose_dim == 15 * 75 + 6
+    with pytest.raises(ValueError):
+        get_config("huge")
+
+
+def test_param_counts_paper_and_tiny():
+    c = count_params("paper")
+    # Hand count of the authors' architecture with the paper's k3 first speech conv (pose 1131, input 1134).
+    assert c == {"speech_encoder": 146_816, "style_encoder": 2_100_864, "generator": 23_301_227}
+    assert 25.4e6 < sum(c.values()) < 25.6e6  # "25M" (Table 2); authors' code ~25.5 M
+    tiny = count_params("tiny")
+    assert sum(tiny.values()) < 60_000
+    shapes = jax.eval_shape(lambda k: S.init_params(CFG, k), jax.random.PRNGKey(0))
+    assert set(shapes) == {"speech_encoder", "style_encoder", "generator"}
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(-3, 3), min_size=4, max_size=4), st.lists(st.floats(-3, 3), min_size=4, max_size=4))
+def test_kl_nonnegative(mu, logvar):
+    mu, logvar = jnp.asarray([mu], jnp.float32), jnp.asarray([logvar], jnp.float32)
+    for red in ("sum", "mean"):
+        assert float(L.kl_divergence(mu, logvar, reduction=red)[0]) >= -1e-6
+
+
+def test_kl_zero_at_prior_and_positive_elsewhere():
+    z = jnp.zeros((3, 8))
+    np.testing.assert_allclose(L.kl_divergence(z, z), 0.0, atol=1e-7)
+    assert float(L.kl_divergence(z + 0.5, z)[0]) == pytest.approx(8 * 0.125, rel=1e-5)
+
+
+def test_kl_weight_monotone_and_capped():
+    steps = np.arange(0, 30_000, 250)
+    w = np.asarray(jax.vmap(lambda s: L.kl_weight(s))(steps))
+    assert np.all(np.diff(w) >= 0) and w.max() == pytest.approx(0.2) and w[0] < 1e-3
+    assert float(L.kl_weight(7500, cap=1.0)) == pytest.approx(0.5)
+
+
+def test_character_state_matches_numpy_integration():
+    rng = np.random.default_rng(1)
+    T = 6
+    vel = rng.normal(size=(T, 3)) * 30
+    ang = np.zeros((T, 3))
+    ang[:, 1] = rng.normal(size=T)  # yaw rate about Y
+    pos_np, rot_np = Fe.integrate_root(vel, ang, CFG.fps)
+    pose = np.zeros((T, P), np.float32)
+    pose[:, CFG.layout.root_velocity] = vel
+    pose[:, CFG.layout.root_angular_velocity] = ang
+    p, q = jnp.zeros((1, 3)), jnp.asarray([[1.0, 0.0, 0.0, 0.0]])
+    mean, std = jnp.zeros(P), jnp.ones(P)
+    for t in range(1, T):
+        p, q = update_character_state(jnp.asarray(pose[t:t + 1]), p, q, cfg=CFG, pose_mean=mean, pose_std=std)
+        np.testing.assert_allclose(p[0], pos_np[t], atol=1e-3)
+        np.testing.assert_allclose(R.quat_to_matrix(q[0]), R.quat_to_matrix(rot_np[t]), atol=1e-5)
+
+
+def test_world_losses_zero_for_identical_and_facing_sensitive():
+    rng = np.random.default_rng(2)
+    pose = jnp.asarray(rng.normal(size=(2, 4, P)), jnp.float32)
+    rp = jnp.asarray(rng.normal(size=(2, 4, 3)), jnp.float32)
+    rr = R.quat_normalize(jnp.asarray(rng.normal(size=(2, 4, 4)), jnp.float32))
+    terms = L.reconstruction_terms(pose, rp, rr, pose, rp, rr, cfg=CFG)
+    assert set(terms) == set(L.term_weights(CFG))
+    for k, v in terms.items():
+        assert v.shape == (2,)
+        np.testing.assert_allclose(v, 0.0, atol=1e-6, err_msg=k)
+    turned = R.quat_mul(jnp.asarray([0.0, 0.0, 1.0, 0.0]), rr)  # 180 deg about Y
+    t2 = L.reconstruction_terms(pose, rp, rr, pose, rp, turned, cfg=CFG)
+    assert float(t2["facing"].min()) > 0.1 and float(t2["local_position"].max()) == 0.0
+
+
+def _gen_inputs(B=2, T=5, seed=0):
+    rng = np.random.default_rng(seed)
+    q = np.zeros((B, 4), np.float32)
+    q[:, 0] = 1.0
+    return (jnp.asarray(rng.normal(size=(B, P)), jnp.float32), jnp.zeros((B, 3)), jnp.asarray(q),
+            jnp.asarray(np.tile([0.6, 0.0, 0.8], (B, 1)), jnp.float32),
+            jnp.asarray(rng.normal(size=(B, T, CFG.speech_embedding)), jnp.float32),
+            jnp.asarray(rng.normal(size=(B, CFG.style_embedding)), jnp.float32))
+
+
+def test_scan_generator_equals_python_loop(params):
+    mean = jnp.asarray(np.linspace(-1, 1, P), jnp.float32)
+    std = jnp.asarray(np.linspace(0.5, 2, P), jnp.float32)
+    scan = jax.jit(lambda p, *a: S.ZeggsModel(CFG).apply({"params": p}, *a, mean, std,
+                                                          method=S.ZeggsModel.generate))
+    pose0, rp0, rr0, facing, speech, style = _gen_inputs()
+    out = scan(params, speech, style, pose0, rp0, rr0, facing)
+    ref = generate_loop_reference(CFG, params["generator"], pose0, rp0, rr0, facing, speech, style, mean, std)
+    for k in ("pose", "root_position", "root_rotation"):
+        np.testing.assert_allclose(out[k], ref[k], rtol=1e-5, atol=1e-5)
+    assert out["pose"].shape == (2, 5, P)
+    np.testing.assert_array_equal(out["pose"][:, 0], pose0)  # frame 0 is the given pose
+    assert float(jnp.abs(out["root_position"][:, -1]).max()) > 0  # the root moved by integration
+
+
+@pytest.fixture(scope="module")
+def forward():
+    b = _batch()
+
+    @jax.jit
+    def f(params, key, temperature):
+        return S.ZeggsModel(CFG).apply(
+            {"params": params}, b["speech"], b["style"], b["style_mask"], b["pose"][:, 0],
+            b["root_position"][:, 0], b["root_rotation"][:, 0], b["facing"], key, temperature=temperature)
+    return f
+
+
+def test_same_seed_same_output_different_seed_differs(params, forward):
+    a, aux_a = forward(params, jax.random.PRNGKey(3), 1.0)
+    b, _ = forward(params, jax.random.PRNGKey(3), 1.0)
+    c, aux_c = forward(params, jax.random.PRNGKey(4), 1.0)
+    np.testing.assert_array_equal(a["pose"], b["pose"])
+    assert not np.allclose(a["pose"], c["pose"])
+    np.testing.assert_array_equal(aux_a["mu"], aux_c["mu"])  # only the sample depends on the key
+    _, aux_d = forward(params, jax.random.PRNGKey(4), 0.0)  # temperature 0: the posterior mean
+    np.testing.assert_allclose(aux_d["style_embedding"], aux_d["mu"], atol=1e-7)
+
+
+def test_sample_style_temperature_scales_spread():
+    mu, logvar = jnp.zeros((4000, 2)), jnp.zeros((4000, 2))
+    e = sample_style(mu, logvar, jax.random.PRNGKey(0), temperature=0.5)
+    assert float(jnp.std(e)) == pytest.approx(0.5, rel=0.05)
+
+
+def test_masked_style_batch_equals_one_at_a_time(params):
+    b = _batch(B=2, S_=12)
+    enc = StyleEncoder(CFG)
+    apply = jax.jit(lambda p, x, m: enc.apply({"params": p}, x, m))
+    mu, logvar = apply(params["style_encoder"], b["style"], b["style_mask"])
+    for i, n in enumerate(b["style_mask"].sum(1)):
+        x = b["style"][i:i + 1, :n]
+        mu_i, lv_i = apply(params["style_encoder"], x, np.ones((1, n), bool))
+        np.testing.assert_allclose(mu[i], mu_i[0], rtol=1e-4, atol=1e-5)
+        np.testing.assert_allclose(logvar[i], lv_i[0], rtol=1e-4, atol=1e-5)
+    junk = b["style"].copy()  # the content of padded frames has no influence
+    junk[1, 8:] = 1e3
+    mu2, _ = apply(params["style_encoder"], junk, b["style_mask"])
+    np.testing.assert_allclose(mu2, mu, rtol=1e-5, atol=1e-6)
+
+
+def test_train_step_decreases_loss_without_retrace(params):
+    # Adam at 3e-3 instead of the paper's RAdam 1e-4 so 30 steps show learning; the step is the same.
+    tx = optax.adam(3e-3)
+    state = S.TrainState.create(apply_fn=S.ZeggsModel(CFG).apply, params=params, tx=tx)
+    rng = np.random.default_rng(0)
+    mean = rng.normal(size=P).astype(np.float32)
+    std = rng.uniform(0.5, 2.0, size=P).astype(np.float32)
+    step = jax.jit(chex.assert_max_traces(S.make_train_step(CFG, tx, pose_mean=mean, pose_std=std), n=1),
+                   donate_argnums=(0,))
+    batch = _batch()
+    key = jax.random.PRNGKey(0)
+    losses = []
+    for _ in range(30):
+        state, m = step(state, batch, key)
+        losses.append(float(m["loss"]))
+    assert all(np.isfinite(losses))
+    assert np.mean(losses[-3:]) < 0.8 * np.mean(losses[:3]), losses
+    assert int(state.step) == 30
+    assert {"loss", "recon", "kl", "kl_weight", "facing", "fd_world_position"} <= set(m)
+
+
+def test_optimizer_is_radam_with_staircase_decay():
+    cfg = get_config("paper")
+    tx = S.make_optimizer(cfg)
+    p = {"w": jnp.ones(3)}
+    st_ = tx.init(p)
+    g = {"w": jnp.ones(3)}
+    # RAdam's first steps are un-adapted momentum SGD: the update is -lr * m_hat = -lr * g.
+    upd, _ = tx.update(g, st_, p)
+    np.testing.assert_allclose(upd["w"], -cfg.learning_rate * np.ones(3), rtol=1e-5)
+    sched = optax.exponential_decay(1e-4, 1000, 0.995, staircase=True)
+    assert float(sched(999)) == pytest.approx(1e-4) and float(sched(1000)) == pytest.approx(0.995e-4)

@@ -1,62 +1,114 @@
-"""``python -m benchmarks [--quick] [--json OUT] [--plot OUT.png] [--cases SUBSTRING]``."""
+"""``python -m benchmarks [--quick] [--json OUT] [--plot OUT.png] [--cases PATTERN] [--repeats N]``.
+
+Runs the registered cases (``benchmarks/cases/``), prints progress, then a markdown table of every record
+and a table of eager/jit and numpy/jit ratios. ``jaxgest bench`` calls :func:`run` with the same options.
+Exit status 0; 1 when an implementation failed its equality check (that case is reported, not timed);
+2 on a usage error (no case matches, unwritable output).
+"""
 
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import json
 import sys
 import time
 
+QUICK_REPEATS, FULL_REPEATS = 3, 7
+QUICK_BUDGET_S, FULL_BUDGET_S = 4.0, 20.0  # timed repeats per implementation (at least 2 repeats)
 
-def build_parser(parser=None):
-    parser = parser or argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__)
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The options shared by ``python -m benchmarks`` and ``jaxgest bench``."""
     parser.add_argument("--quick", action="store_true", help="fewer cases and repeats (< 2 minutes)")
-    parser.add_argument("--json", metavar="OUT", help="write the records (SPEC §8) to this JSON file")
-    parser.add_argument("--plot", metavar="OUT.png", help="per-pose cost against clip length")
-    parser.add_argument("--cases", metavar="SUBSTRING", default=None,
-                        help="only cases whose name contains this (comma-separated alternatives)")
+    parser.add_argument("--json", metavar="OUT", help="write machine info and the records (SPEC §8) here")
+    parser.add_argument("--plot", metavar="OUT.png", help="PNG of per-pose cost against clip length")
+    parser.add_argument("--cases", metavar="PATTERN", default=None,
+                        help="only these cases: comma-separated substrings or globs (e.g. 'toy*,tgst_transfer')")
     parser.add_argument("--repeats", type=int, default=None, help="timed repeats per implementation")
     return parser
 
 
-def run(args) -> dict:
+def build_parser() -> argparse.ArgumentParser:
+    return add_arguments(argparse.ArgumentParser(prog="python -m benchmarks",
+                                                 description="jaxgest per-pose CPU cost benchmarks"))
+
+
+def select(cases: list, pattern: str | None) -> list:
+    """Cases whose name matches one comma-separated alternative (glob if it has ``*?[``, else substring)."""
+    if not pattern:
+        return list(cases)
+    pats = [p.strip() for p in pattern.split(",") if p.strip()]
+
+    def match(name: str, p: str) -> bool:
+        return fnmatch.fnmatchcase(name, p) if any(ch in p for ch in "*?[") else p in name
+
+    return [c for c in cases if any(match(c.name, p) for p in pats)]
+
+
+def run(args) -> tuple[dict, int]:
+    """Run the suite for parsed ``args``; returns the JSON document and the exit status."""
     from benchmarks import harness, report
     from benchmarks.cases import all_cases
+    from jaxgest.errors import JaxgestError
+    from jaxgest.io import check_output_path, write_text_atomic
 
+    for out in (args.json, args.plot):
+        if out:
+            check_output_path(out)  # fail now, not after a 15-minute run
+    if args.repeats is not None and args.repeats < 2:
+        raise JaxgestError(f"--repeats must be at least 2, got {args.repeats}")
+    harness.configure_jax()
     t0 = time.perf_counter()
     info = harness.machine_info()
-    print(f"# jaxgest benchmarks on {info['cpu']} ({info['cores']} cores), jax {info['jax']}", flush=True)
-    cases = all_cases(quick=args.quick)
-    if args.quick:
-        cases = [c for c in cases if c.quick]
-    if args.cases:
-        pats = [p.strip() for p in args.cases.split(",") if p.strip()]
-        cases = [c for c in cases if any(p in c.name for p in pats)]
-    repeats = args.repeats or (3 if args.quick else 7)
-    records = []
+    cases = [c for c in all_cases(quick=args.quick) if c.quick or not args.quick]
+    cases = select(cases, args.cases)
+    if not cases:
+        raise JaxgestError(f"no benchmark case matches {args.cases!r}")
+    repeats = args.repeats or (QUICK_REPEATS if args.quick else FULL_REPEATS)
+    budget = QUICK_BUDGET_S if args.quick else FULL_BUDGET_S
+    print(f"# jaxgest benchmarks on {info['cpu']} ({info['cores']} cores), jax {info['jax']}, "
+          f"{len(cases)} cases", flush=True)
+    records, failures = [], []
     for case in cases:
-        records.extend(harness.run_case(case, repeats=repeats))
-    for r in records:
-        harness.validate_record(r)
-    result = {"machine": info, "quick": bool(args.quick), "wall_s": time.perf_counter() - t0,
-              "ratios": report.ratios(records), "records": records}
+        try:
+            records.extend(harness.run_case(case, repeats=repeats, budget_s=budget,
+                                            log=lambda s: print(s, flush=True)))
+        except harness.EqualityError as e:
+            print(f"  {case.name}: NOT TIMED, implementations disagree: {e}", flush=True)
+            failures.append({"case": case.name, "error": str(e)})
+    doc = {"machine": info, "quick": bool(args.quick), "wall_s": time.perf_counter() - t0,
+           "ratios": report.ratios(records), "failures": failures, "records": records}
+    harness.validate_document(doc)
     print()
     print(report.markdown_table(records))
+    rt = report.ratio_table(records)
+    if rt:
+        print()
+        print(rt)
     if args.json:
-        from jaxgest.io import write_text_atomic
-
-        write_text_atomic(args.json, json.dumps(result, indent=2) + "\n")
+        write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
         print(f"\nwrote {args.json}")
     if args.plot:
         if report.plot_scaling(records, args.plot):
             print(f"wrote {args.plot}")
-    print(f"total {result['wall_s']:.1f} s")
-    return result
+        else:
+            print(f"no case family spans several clip lengths: {args.plot} not written")
+    print(f"total {doc['wall_s']:.1f} s")
+    for f in failures:
+        print(f"FAILED equality check: {f['error']}", file=sys.stderr)
+    return doc, 1 if failures else 0
 
 
 def main(argv=None) -> int:
-    run(build_parser().parse_args(argv))
-    return 0
+    from jaxgest.errors import JaxgestError
+
+    args = build_parser().parse_args(argv)
+    try:
+        return run(args)[1]
+    except JaxgestError as e:
+        print(f"benchmarks: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

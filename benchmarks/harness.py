@@ -1,28 +1,38 @@
 """Timing harness: trace / lower / compile separately from steady state, warm-up, repeats, peak memory.
 
 A :class:`Case` is one workload (name, batch, frames) with several :class:`Impl` implementations of the
-same computation on the same weights (``jit``, ``eager``, ``numpy`` ...). :func:`run_case` first checks
-that every implementation produces the same output as the first one (``check_equal``: a benchmark that
-times a wrong implementation is worse than none), then times each:
+same computation on the same weights (``jit``, ``eager``, ``numpy`` ...). :func:`run_case` first runs
+every implementation once and checks that it produces the same output as the first one
+(:func:`check_equal`; nothing is timed when they disagree -- a benchmark that times a wrong implementation
+is worse than none), then times each:
 
-* jit impls (``kind="jit"``): ``jax.jit(f).trace(*args)``, ``.lower()``, ``.compile()`` are timed one by
-  one (``trace_s``, ``lower_s``, ``compile_s``), then the compiled executable runs in steady state;
-* other impls: steady state only.
+* jit impls (``kind="jit"``): the in-memory JAX caches are cleared, then ``jax.jit(f).trace(*args)``,
+  ``.lower()`` and ``.compile()`` are timed one by one (``trace_s``, ``lower_s``, ``compile_s``), and the
+  resulting ``Compiled`` executable is what runs in steady state. The persistent compilation cache is
+  switched off by :func:`configure_jax` (``python -m benchmarks`` calls it) so ``compile_s`` is a real
+  compile, not a disk read;
+* other impls (eager JAX under ``jax.disable_jit()``, NumPy, ...): steady state only, ``compile_s`` null.
 
-Steady state: ``warmup`` calls, then ``repeats`` timed repeats; each repeat runs the call ``inner`` times
-(chosen so a repeat lasts at least ``min_repeat_s``) and records the time per call. Outputs are waited
-for with ``jax.block_until_ready``. Reported: ``min_us`` and ``median_us`` per call and
-``per_pose_us = median_us / poses`` (poses = batch x frames unless the case says otherwise).
+Steady state: warm-up calls (at least one: eager JAX caches one executable per primitive on first use),
+then ``repeats`` timed repeats. Each repeat runs the call ``inner`` times, ``inner`` chosen so a repeat
+lasts at least ``min_repeat_s`` (20 ms) and the per-call time is recorded; every call's output is waited
+for with ``jax.block_until_ready`` before the next call starts, so the number is the latency of one call,
+not the throughput of overlapping asynchronous dispatches. Implementations slower than the per-impl
+budget get fewer repeats (never fewer than 2); ``repeats`` in the record is what was actually run.
+Reported: ``min_us`` and ``median_us`` per call and ``per_pose_us = median_us / poses`` (poses = batch x
+frames unless the case says otherwise).
 
-Peak memory: the process's resident-set high-water mark (Linux ``VmHWM``), reset before each
-implementation through ``/proc/self/clear_refs`` ("5"), so ``peak_rss_mb`` is the peak RSS of the process
-while that implementation was compiled and run (it includes what the process already held: compare
-between rows, not as an absolute model size). ``None`` where the kernel does not allow the reset.
+Peak memory (Linux): before each implementation is timed the kernel's resident-set high-water mark is
+reset (``/proc/self/clear_refs`` <- "5"). ``peak_rss_mb`` is ``VmHWM`` afterwards -- the peak RSS of the
+whole process while that implementation was traced, compiled and run -- and ``peak_mem_mb`` is that peak
+minus the RSS just before (what the implementation added at its peak: compiled code, buffers, temporaries;
+the inputs and weights, built before, are not counted). Both are ``None`` where the reset is not allowed.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import platform
 import statistics
@@ -32,26 +42,37 @@ from typing import Any, Callable, Optional, Sequence
 import jax
 import numpy as np
 
-RECORD_FIELDS = {
-    "case": str,
-    "impl": str,
-    "batch": int,
-    "frames": int,
-    "per_pose_us": float,
+# The SPEC §8 record (key -> allowed JSON types), and the extra fields this harness adds.
+RECORD_FIELDS: dict[str, tuple] = {
+    "case": (str,),
+    "impl": (str,),
+    "batch": (int,),
+    "frames": (int,),
+    "per_pose_us": (float,),
     "compile_s": (float, type(None)),
-    "repeats": int,
-    "min_us": float,
-    "median_us": float,
+    "repeats": (int,),
+    "min_us": (float,),
+    "median_us": (float,),
 }
-EXTRA_FIELDS = {
+EXTRA_FIELDS: dict[str, tuple] = {
     "trace_s": (float, type(None)),
     "lower_s": (float, type(None)),
-    "inner": int,
-    "poses": int,
+    "inner": (int,),
+    "poses": (int,),
     "peak_rss_mb": (float, type(None)),
+    "peak_mem_mb": (float, type(None)),
     "max_abs_diff": (float, type(None)),
-    "group": str,
-    "note": str,
+    "group": (str,),
+    "note": (str,),
+}
+# The JSON document written by ``--json``.
+DOCUMENT_FIELDS: dict[str, tuple] = {
+    "machine": (dict,),
+    "quick": (bool,),
+    "wall_s": (float,),
+    "records": (list,),
+    "ratios": (dict,),
+    "failures": (list,),
 }
 
 
@@ -61,7 +82,11 @@ class EqualityError(AssertionError):
 
 @dataclasses.dataclass
 class Impl:
-    """One implementation: ``fn(*args)``; ``kind`` is ``"jit"`` (AOT-timed) or anything else."""
+    """One implementation: ``fn(*args)``; ``kind="jit"`` gets trace / lower / compile timed apart.
+
+    For ``kind="jit"``, ``fn`` is either a ``jax.jit``-wrapped function (static arguments already bound)
+    or a plain function that the harness wraps in ``jax.jit``.
+    """
 
     name: str
     fn: Callable
@@ -70,10 +95,11 @@ class Impl:
 
 @dataclasses.dataclass
 class Case:
-    """A workload and its implementations. ``args`` is built lazily (``make_args()``) once per case.
+    """A workload and its implementations. ``make_args()`` builds the inputs (and weights) once.
 
-    ``group`` names a family of cases plotted together (e.g. per-pose cost against clip length).
-    ``poses`` defaults to batch x frames. ``rtol``/``atol`` are the equality tolerances.
+    ``group`` names a family of cases plotted together (per-pose cost against clip length).
+    ``poses`` defaults to batch x frames. ``rtol``/``atol`` are the equality tolerances (``np.allclose``
+    semantics, in float64). ``quick`` marks cases that are part of ``--quick``.
     """
 
     name: str
@@ -86,12 +112,21 @@ class Case:
     atol: float = 1e-4
     group: str = ""
     note: str = ""
-    quick: bool = True  # part of --quick
-    max_repeats_slow: int = 3  # for impls slower than ~1 s per call
+    quick: bool = True
+    max_repeats_slow: int = 3  # repeats for impls slower than ~1 s per call
 
     @property
     def num_poses(self) -> int:
         return self.poses if self.poses is not None else self.batch * self.frames
+
+
+def configure_jax() -> None:
+    """Benchmark settings: no persistent compilation cache (compile_s must be a real compile)."""
+    jax.config.update("jax_enable_compilation_cache", False)
+
+
+def _as_jitted(impl: Impl):
+    return impl.fn if hasattr(impl.fn, "trace") else jax.jit(impl.fn)
 
 
 def _to_numpy_tree(x):
@@ -99,83 +134,94 @@ def _to_numpy_tree(x):
 
 
 def check_equal(outputs: dict, *, rtol: float, atol: float) -> dict:
-    """Compare every output pytree with the first; raise :class:`EqualityError` naming the impl that differs.
+    """Compare every output pytree with the first one's; return ``{impl: max_abs_diff}``.
 
-    Returns ``{impl: max_abs_diff}``.
+    Raises :class:`EqualityError` naming the implementation that differs (structure, shape, values) or
+    the reference when its output is not finite (NaN == NaN would hide a broken case).
     """
     names = list(outputs)
-    ref = _to_numpy_tree(outputs[names[0]])
-    ref_leaves, ref_def = jax.tree_util.tree_flatten(ref)
-    diffs = {names[0]: 0.0}
+    ref_name = names[0]
+    ref_leaves, ref_def = jax.tree_util.tree_flatten_with_path(_to_numpy_tree(outputs[ref_name]))
+    for path, a in ref_leaves:
+        if not np.all(np.isfinite(a)):
+            raise EqualityError(f"{ref_name}: output{jax.tree_util.keystr(path)} is not finite")
+    diffs = {ref_name: 0.0}
     for name in names[1:]:
-        leaves, tree_def = jax.tree_util.tree_flatten(_to_numpy_tree(outputs[name]))
+        leaves, tree_def = jax.tree_util.tree_flatten_with_path(_to_numpy_tree(outputs[name]))
         if tree_def != ref_def:
-            raise EqualityError(f"{name}: output structure differs from {names[0]}")
+            raise EqualityError(f"{name}: output structure {tree_def} differs from {ref_name}'s {ref_def}")
         worst = 0.0
-        for a, b in zip(ref_leaves, leaves):
+        for (path, a), (_, b) in zip(ref_leaves, leaves):
+            where = f"output{jax.tree_util.keystr(path)}"
             if a.shape != b.shape:
-                raise EqualityError(f"{name}: output shape {b.shape} differs from {names[0]}'s {a.shape}")
+                raise EqualityError(f"{name}: {where} shape {b.shape} differs from {ref_name}'s {a.shape}")
             if not np.allclose(b, a, rtol=rtol, atol=atol):
-                bad = float(np.max(np.abs(b - a)))
+                err = np.abs(b - a)
+                bad = float(np.nanmax(err)) if np.any(np.isfinite(err)) else float("nan")
                 raise EqualityError(
-                    f"{name}: output differs from {names[0]} (max abs diff {bad:.3g} > atol {atol} + rtol {rtol})"
+                    f"{name}: {where} differs from {ref_name}'s (max abs diff {bad:.3g}, "
+                    f"{int(np.sum(~np.isclose(b, a, rtol=rtol, atol=atol)))} of {a.size} values outside "
+                    f"atol {atol:g} + rtol {rtol:g})"
                 )
             worst = max(worst, float(np.max(np.abs(b - a))) if a.size else 0.0)
         diffs[name] = worst
     return diffs
 
 
-def _reset_peak() -> bool:
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-        return True
-    except OSError:
-        return False
-
-
-def _peak_rss_mb() -> Optional[float]:
+def _status_mb(key: str) -> Optional[float]:
     try:
         with open("/proc/self/status") as f:
             for line in f:
-                if line.startswith("VmHWM:"):
+                if line.startswith(key + ":"):
                     return float(line.split()[1]) / 1024.0
     except OSError:
         pass
     return None
 
 
-def _block(x):
-    return jax.block_until_ready(x)
+def _reset_peak() -> Optional[float]:
+    """Reset the RSS high-water mark; return the current RSS in MB, or None when not possible."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        return None
+    return _status_mb("VmRSS")
 
 
 def time_steady(call: Callable[[], Any], *, repeats: int, warmup: int = 2, min_repeat_s: float = 0.02,
-                max_inner: int = 10_000) -> tuple[list[float], int]:
-    """Per-call seconds of ``repeats`` repeats (after ``warmup`` calls) and the inner loop count used."""
-    t0 = time.perf_counter()
+                budget_s: float = float("inf"), max_inner: int = 10_000) -> tuple[list[float], int]:
+    """Per-call seconds of the timed repeats (after ``warmup`` untimed calls) and the inner count used.
+
+    The warm-up calls also estimate one call's cost, which fixes ``inner`` (a repeat lasts at least
+    ``min_repeat_s``) and caps the repeats so their total stays within ``budget_s`` (at least 2).
+    """
+    warm = []
     for _ in range(max(warmup, 1)):
-        _block(call())
-    single = (time.perf_counter() - t0) / max(warmup, 1)
-    inner = int(min(max_inner, max(1, np.ceil(min_repeat_s / max(single, 1e-9)))))
+        t = time.perf_counter()
+        jax.block_until_ready(call())
+        warm.append(time.perf_counter() - t)
+    single = max(min(warm), 1e-9)
+    inner = int(min(max_inner, max(1, math.ceil(min_repeat_s / single))))
+    repeats = max(2, min(repeats, int(budget_s // (single * inner))))
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
         for _ in range(inner):
-            out = call()
-        _block(out)
+            jax.block_until_ready(call())
         times.append((time.perf_counter() - t) / inner)
     return times, inner
 
 
-def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repeat_s: float = 0.02) -> dict:
-    """Time one implementation; returns the timing fields of a record."""
-    tracked = _reset_peak()
+def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repeat_s: float = 0.02,
+            budget_s: float = 20.0, slow_repeats: int = 3) -> dict:
+    """Time one implementation; returns the timing and memory fields of a record."""
+    rss0 = _reset_peak()
     rec: dict = {"trace_s": None, "lower_s": None, "compile_s": None}
     if impl.kind == "jit":
-        jitted = impl.fn if hasattr(impl.fn, "trace") else jax.jit(impl.fn)
-        # The equality check already compiled this computation: drop the in-memory caches so the
-        # trace / lower / compile times below are those of a first call. (A persistent compilation
-        # cache, if configured, would still shorten compile_s; the suite reports it as measured.)
+        jitted = _as_jitted(impl)
+        # The equality check compiled this computation already: drop the in-memory caches so that the
+        # trace / lower / compile times are those of a first call.
         jax.clear_caches()
         t0 = time.perf_counter()
         traced = jitted.trace(*args)
@@ -193,36 +239,42 @@ def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repea
         def call():
             return impl.fn(*args)
 
-    # Very slow implementations (eager JAX at large sizes) get fewer repeats; the rule is recorded.
+    # A first call tells slow implementations (eager JAX on long clips) apart: one warm-up and fewer
+    # repeats for those, so the suite stays within its time budget.
     t = time.perf_counter()
-    _block(call())
-    first = time.perf_counter() - t
-    if first > 1.0:
-        repeats = max(2, min(repeats, 3))
-        warmup = 0
-    times, inner = time_steady(call, repeats=repeats, warmup=warmup, min_repeat_s=min_repeat_s)
+    jax.block_until_ready(call())
+    if time.perf_counter() - t > 1.0:
+        repeats, warmup = min(repeats, slow_repeats), 0
+    times, inner = time_steady(call, repeats=repeats, warmup=warmup, min_repeat_s=min_repeat_s,
+                               budget_s=budget_s)
+    peak = _status_mb("VmHWM") if rss0 is not None else None
     rec.update(
         repeats=len(times),
         inner=inner,
         min_us=min(times) * 1e6,
         median_us=statistics.median(times) * 1e6,
-        peak_rss_mb=_peak_rss_mb() if tracked else None,
+        peak_rss_mb=peak,
+        peak_mem_mb=None if peak is None else max(0.0, peak - rss0),
     )
     return rec
 
 
 def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = None, check: bool = True,
-             log: Callable[[str], None] = print) -> list[dict]:
-    """Check the implementations agree, then time each; one record per implementation."""
+             budget_s: float = 20.0, log: Callable[[str], None] = print) -> list[dict]:
+    """Check the implementations agree, then time each; one record per implementation.
+
+    Raises :class:`EqualityError` (before anything is timed) when an implementation disagrees.
+    """
     args = case.make_args()
     chosen = [i for i in case.impls if impls is None or i.name in impls]
-    diffs = {}
+    diffs: dict = {}
     if check and len(chosen) > 1:
         outputs = {}
         for impl in chosen:
-            fn = jax.jit(impl.fn) if impl.kind == "jit" and not hasattr(impl.fn, "trace") else impl.fn
+            fn = _as_jitted(impl) if impl.kind == "jit" else impl.fn
             outputs[impl.name] = jax.device_get(fn(*args))
         diffs = check_equal(outputs, rtol=case.rtol, atol=case.atol)
+        del outputs
     records = []
     for impl in chosen:
         rec = {
@@ -235,26 +287,50 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
             "note": case.note,
             "max_abs_diff": diffs.get(impl.name),
         }
-        rec.update(measure(impl, args, repeats=repeats))
+        rec.update(measure(impl, args, repeats=repeats, budget_s=budget_s, slow_repeats=case.max_repeats_slow))
         rec["per_pose_us"] = rec["median_us"] / case.num_poses
-        log(f"  {case.name:<34} {impl.name:<8} {rec['median_us'] / 1e3:10.3f} ms/call  "
-            f"{rec['per_pose_us']:9.4f} us/pose  compile {rec['compile_s'] or 0:.2f} s")
+        log(f"  {case.name:<28} {impl.name:<6} {rec['median_us'] / 1e3:10.3f} ms/call "
+            f"{rec['per_pose_us']:10.4f} us/pose  compile {rec['compile_s'] or 0:5.2f} s  x{rec['repeats']}")
         records.append(rec)
     return records
 
 
+def _check_fields(obj: dict, fields: dict, required: bool, what: str) -> None:
+    for key, types in fields.items():
+        if key not in obj:
+            if required:
+                raise ValueError(f"{what} misses {key!r}")
+            continue
+        value = obj[key]
+        # bool is an int subclass in Python but not a number in the schema.
+        if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
+            names = "/".join("null" if t is type(None) else t.__name__ for t in types)
+            raise ValueError(f"{what} field {key!r} is {type(value).__name__}, expected {names}")
+
+
 def validate_record(rec: dict) -> None:
     """Raise ValueError when a record does not follow the SPEC §8 schema (plus the extra fields)."""
-    for key, typ in RECORD_FIELDS.items():
-        if key not in rec:
-            raise ValueError(f"record misses {key!r}: {rec}")
-        if not isinstance(rec[key], typ) or isinstance(rec[key], bool):
-            raise ValueError(f"record field {key!r} has type {type(rec[key]).__name__}: {rec}")
-    for key, typ in EXTRA_FIELDS.items():
-        if key in rec and not isinstance(rec[key], typ):
-            raise ValueError(f"record field {key!r} has type {type(rec[key]).__name__}")
-    if rec["median_us"] < rec["min_us"] or rec["min_us"] <= 0:
-        raise ValueError(f"record times are inconsistent: {rec}")
+    what = f"record {rec.get('case')}/{rec.get('impl')}"
+    _check_fields(rec, RECORD_FIELDS, True, what)
+    _check_fields(rec, EXTRA_FIELDS, False, what)
+    if not (0 < rec["min_us"] <= rec["median_us"]) or rec["per_pose_us"] <= 0:
+        raise ValueError(f"{what}: times are inconsistent (min {rec['min_us']}, median {rec['median_us']})")
+    if rec["batch"] < 1 or rec["frames"] < 1 or rec["repeats"] < 1:
+        raise ValueError(f"{what}: batch, frames and repeats must be positive")
+    if rec["compile_s"] is not None and rec["compile_s"] < 0:
+        raise ValueError(f"{what}: negative compile_s")
+
+
+def validate_document(doc: dict) -> None:
+    """Raise ValueError when a ``--json`` document (machine info + records) is malformed."""
+    if not isinstance(doc, dict):
+        raise ValueError(f"document is {type(doc).__name__}, expected an object")
+    _check_fields(doc, DOCUMENT_FIELDS, True, "document")
+    for rec in doc["records"]:
+        validate_record(rec)
+    for key in ("cpu", "cores", "jax", "jaxlib", "xla_flags"):
+        if key not in doc["machine"]:
+            raise ValueError(f"document machine info misses {key!r}")
 
 
 def machine_info() -> dict:
@@ -270,9 +346,14 @@ def machine_info() -> dict:
         pass
     import jaxlib
 
+    try:
+        affinity = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        affinity = None
     return {
         "cpu": cpu,
         "cores": os.cpu_count(),
+        "cores_usable": affinity,
         "python": platform.python_version(),
         "jax": jax.__version__,
         "jaxlib": jaxlib.__version__,
@@ -280,4 +361,6 @@ def machine_info() -> dict:
         "backend": jax.default_backend(),
         "devices": jax.device_count(),
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "persistent_compilation_cache": bool(jax.config.jax_enable_compilation_cache
+                                             and jax.config.jax_compilation_cache_dir),
     }

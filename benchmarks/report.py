@@ -1,4 +1,4 @@
-"""Markdown table, side-by-side ratios, and the per-pose-cost-vs-length plot."""
+"""Markdown tables (every record; eager/jit and numpy/jit side by side) and the scaling plot."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from collections import defaultdict
 
 
 def ratios(records: list[dict]) -> dict:
-    """``{case: {impl: median / median of jit}}`` for cases timed with several impls in the same run."""
-    by_case = defaultdict(dict)
+    """``{case: {impl: median / median of jit}}`` for cases timed with jit and other impls in one run."""
+    by_case: dict = defaultdict(dict)
     for r in records:
         by_case[r["case"]][r["impl"]] = r["median_us"]
     out = {}
@@ -18,26 +18,73 @@ def ratios(records: list[dict]) -> dict:
     return out
 
 
+def _us(x: float) -> str:
+    return f"{x:,.1f}" if x < 1e4 else f"{x:,.0f}"
+
+
 def markdown_table(records: list[dict]) -> str:
+    """One row per record: per-pose, median and min µs, compile seconds, and the ratio to jit."""
     rat = ratios(records)
     lines = [
-        "| case | impl | batch | frames | per-pose µs | median ms | min ms | compile s | vs jit |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| case | impl | batch | frames | per-pose µs | median µs | min µs | compile s | repeats | vs jit |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in records:
         comp = "" if r.get("compile_s") is None else f"{r['compile_s']:.2f}"
         vs = rat.get(r["case"], {}).get(r["impl"])
         lines.append(
             f"| {r['case']} | {r['impl']} | {r['batch']} | {r['frames']} | {r['per_pose_us']:.4g} | "
-            f"{r['median_us'] / 1e3:.4g} | {r['min_us'] / 1e3:.4g} | {comp} | {'' if vs is None else f'{vs:.1f}x'} |"
+            f"{_us(r['median_us'])} | {_us(r['min_us'])} | {comp} | {r['repeats']} | "
+            f"{'' if vs is None else f'{vs:.2f}x'} |"
         )
     return "\n".join(lines)
 
 
-def plot_scaling(records: list[dict], out_png, group: str = "tgst_scaling") -> pathlib.Path | None:
-    """Per-pose cost against clip length for the records of ``group`` (PNG, matplotlib Agg)."""
-    rows = sorted((r for r in records if r.get("group") == group), key=lambda r: r["frames"])
-    if not rows:
+def ratio_table(records: list[dict]) -> str:
+    """Cases timed with jit and other impls: per-pose µs of each impl and ``<impl>/jit``, one row per case."""
+    rows: dict = defaultdict(dict)
+    meta = {}
+    for r in records:
+        rows[r["case"]][r["impl"]] = r
+        meta.setdefault(r["case"], (r["batch"], r["frames"]))
+    cases = [c for c, impls in rows.items() if "jit" in impls and len(impls) > 1]
+    if not cases:
+        return ""
+    others = sorted({i for c in cases for i in rows[c] if i != "jit"}, key=lambda i: (i != "eager", i))
+    head = ["case", "batch", "frames", "jit µs/pose"] + [f"{i} µs/pose" for i in others]
+    head += [f"{i}/jit" for i in others]
+    lines = ["| " + " | ".join(head) + " |", "|---|" + "---:|" * (len(head) - 1)]
+    for c in cases:
+        jit = rows[c]["jit"]["median_us"]
+        cells = [c, str(meta[c][0]), str(meta[c][1]), f"{rows[c]['jit']['per_pose_us']:.4g}"]
+        cells += [f"{rows[c][i]['per_pose_us']:.4g}" if i in rows[c] else "" for i in others]
+        cells += [f"{rows[c][i]['median_us'] / jit:.2f}x" if i in rows[c] else "" for i in others]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def scaling_groups(records: list[dict]) -> list[str]:
+    """Groups whose records span at least two clip lengths (the ones worth a scaling plot)."""
+    frames: dict = defaultdict(set)
+    for r in records:
+        if r.get("group"):
+            frames[r["group"]].add(r["frames"])
+    return [g for g, f in frames.items() if len(f) >= 2]
+
+
+def plot_scaling(records: list[dict], out_png, group: str | None = None) -> pathlib.Path | None:
+    """Per-pose cost (median, min dashed) against clip length, one line per group and impl (PNG, Agg).
+
+    ``group=None`` plots every group spanning several clip lengths. Returns the path, or None when there
+    is nothing to plot.
+    """
+    groups = [group] if group else scaling_groups(records)
+    series: dict = defaultdict(list)
+    for r in records:
+        if r.get("group") in groups:
+            series[(r["group"], r["impl"])].append(r)
+    series = {k: sorted(v, key=lambda r: r["frames"]) for k, v in series.items() if len(v) >= 2}
+    if not series:
         return None
     import matplotlib
 
@@ -46,17 +93,20 @@ def plot_scaling(records: list[dict], out_png, group: str = "tgst_scaling") -> p
 
     from jaxgest.io import atomic_output
 
-    fig, ax = plt.subplots(figsize=(5.5, 3.4), dpi=110)
-    xs = [r["frames"] for r in rows]
-    ax.plot(xs, [r["per_pose_us"] for r in rows], "o-", label="median")
-    ax.plot(xs, [r["min_us"] / r["poses"] for r in rows], ".--", alpha=0.6, label="min")
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=110)
+    for (grp, impl), rows in sorted(series.items()):
+        xs = [r["frames"] for r in rows]
+        poses = [r.get("poses") or r["batch"] * r["frames"] for r in rows]
+        line = ax.plot(xs, [r["per_pose_us"] for r in rows], "o-", label=f"{grp} / {impl} (median)")[0]
+        ax.plot(xs, [r["min_us"] / p for r, p in zip(rows, poses)], ".--", alpha=0.5, color=line.get_color())
+    batches = sorted({r["batch"] for rows in series.values() for r in rows})
     ax.set_xscale("log", base=2)
-    ax.set_xlabel("content clip length (frames), style clip 1280 frames")
-    ax.set_ylabel("µs per pose (batch 1, jit)")
-    ax.set_ylim(bottom=0)
-    ax.set_title("TGST transfer: per-pose cost vs clip length")
-    ax.grid(alpha=0.3)
-    ax.legend()
+    ax.set_yscale("log")
+    ax.set_xlabel("clip length (frames)")
+    ax.set_ylabel(f"µs per pose (batch {', '.join(map(str, batches))}; dashed: min)")
+    ax.set_title("Per-pose cost against clip length")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
     fig.tight_layout()
     with atomic_output(out_png) as tmp:
         fig.savefig(tmp, format="png")

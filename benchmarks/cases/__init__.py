@@ -1,28 +1,60 @@
-"""Benchmark case registry.
+"""Benchmark case registry: every module of this package that defines ``cases(quick)`` is picked up.
 
-Each module in this package exposes ``cases(quick: bool) -> list[harness.Case]``; :func:`all_cases`
-collects them in the order of ``MODULES``. To add a case: write a function building a
-:class:`benchmarks.harness.Case` (same weights for every implementation, ``make_args`` builds the inputs
-once), return it from your module's ``cases``, and add the module name here if it is new. Modules whose
-imports fail because a model does not exist yet are skipped with a note.
+How to add a case
+-----------------
+1. Create (or extend) a module here, e.g. ``benchmarks/cases/zeggs.py``, defining
+   ``cases(quick: bool) -> list[benchmarks.harness.Case]``. Nothing else needs registering: modules are
+   discovered by :func:`all_cases` in alphabetical order (``_``-prefixed modules are skipped).
+2. Build each :class:`~benchmarks.harness.Case` with ``name`` (unique, used by ``--cases``), ``batch``,
+   ``frames`` (``poses`` if a call produces something other than batch x frames poses), ``impls`` and
+   ``make_args`` -- a function returning the argument tuple passed to every implementation (weights and
+   inputs built once; every implementation gets the same weights).
+3. Implementations are :class:`~benchmarks.harness.Impl`: ``Impl("jit", jax.jit(f), kind="jit")`` (trace
+   / lower / compile timed apart; bind static arguments with ``functools.partial`` before ``jax.jit``),
+   ``Impl("eager", f_under_disable_jit)``, ``Impl("numpy", reference)``. Name them ``jit`` / ``eager`` /
+   ``numpy`` so the report computes eager/jit and numpy/jit. The first implementation is the reference of
+   the equality check; pick ``rtol``/``atol`` for float32 (1e-4 .. 1e-3).
+4. Give a family of clip lengths one ``group`` (e.g. ``"tgst_scaling"``) to get it into ``--plot``; set
+   ``quick=False`` on cases too slow for ``--quick`` (< 2 minutes for the whole quick suite on 2 cores),
+   or return fewer cases from ``cases(quick=True)``.
+
+A module whose import fails because a ``jaxgest`` model module does not exist yet (or lacks a name) is
+skipped with a note; any other import error is a bug and propagates.
+
+``toy`` is the harness demonstration (an inline conv stack, not a model); the model cases live in
+``tgst`` (transfer, clip-length scaling, stages), ``zeggs`` and training-step modules.
 """
 
 from __future__ import annotations
 
 import importlib
+import pkgutil
+from typing import Callable
 
-MODULES = ("benchmarks.cases.tgst", "benchmarks.cases.zeggs", "benchmarks.cases.train")
+
+def case_modules() -> list[str]:
+    """Fully qualified names of the case modules in this package, alphabetical."""
+    return sorted(f"{__name__}.{m.name}" for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
 
 
-def all_cases(quick: bool = False, log=print) -> list:
+def all_cases(quick: bool = False, log: Callable[[str], None] = print) -> list:
+    """Every case of every case module (``cases(quick)``), in module order; duplicate names are a bug."""
     out = []
-    for name in MODULES:
+    for name in case_modules():
         try:
             module = importlib.import_module(name)
-        except ModuleNotFoundError as e:
-            if e.name and (e.name == name or e.name.startswith("jaxgest.")):
-                log(f"  (skipping {name}: {e.name} is not available)")
+        except ImportError as e:  # ModuleNotFoundError included
+            missing = e.name or ""
+            if missing.startswith("jaxgest"):
+                log(f"  (skipping {name}: {missing} is not available yet: {e})")
                 continue
             raise
+        if not hasattr(module, "cases"):
+            continue
         out.extend(module.cases(quick))
+    seen: set = set()
+    for case in out:
+        if case.name in seen:
+            raise ValueError(f"benchmark case name {case.name!r} is registered twice")
+        seen.add(case.name)
     return out

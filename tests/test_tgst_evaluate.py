@@ -227,12 +227,37 @@ def test_cli_writes_json_and_prints_table(data_dir, tmp_path, monkeypatch, capsy
 
 def test_short_clips_are_skipped(tmp_path):
     write_dataset(tmp_path, clips=2, seconds=2.0, progress=False)  # 120 frames < one 128-frame window
+
+    class NeverCalled:
+        def transfer(self, content, style, method="soft"):
+            raise AssertionError("a pair too short to evaluate must not be transferred")
+
     report = ev.evaluate(
-        "unused", tmp_path, pairs="intra", methods=("soft",), model=IdentityModel(), progress=False
+        "unused", tmp_path, pairs="intra", methods=("soft",), model=NeverCalled(), progress=False
     )
     s = report["methods"]["soft"]
     assert report["num_pairs"] == 1 and s["num_skipped"] == 1 and s["content"] is None
-    assert "shorter than one window" in report["per_pair"][0]["errors"]["soft"]["skipped"]
+    assert "shorter than one style window" in report["per_pair"][0]["errors"]["soft"]["skipped"]
+
+
+def test_model_data_errors_are_skipped(data_dir):
+    class Picky:
+        def transfer(self, content, style, method="soft"):
+            if method == "hard":
+                raise DataError("clip too short for the tokenizer")
+            return content
+
+    report = ev.evaluate(
+        "unused",
+        data_dir,
+        pairs="intra",
+        methods=("soft", "hard"),
+        max_pairs=2,
+        model=Picky(),
+        progress=False,
+    )
+    assert report["methods"]["hard"]["num_skipped"] == 2 and report["methods"]["hard"]["content"] is None
+    assert report["methods"]["soft"]["num_evaluated"] == 2
 
 
 def test_real_bandai_pairs_and_errors(bandai_dir):

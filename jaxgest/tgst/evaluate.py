@@ -192,6 +192,15 @@ class _FeatureCache:
         return self._cache[key][1]
 
 
+def _too_short(pair: Pair, cache: _FeatureCache, fps: float, window: int) -> str:
+    """Why the pair cannot be evaluated (content or style clip shorter than one style window), or ''."""
+    for role, clip in (("content", pair.content), ("style", pair.style)):
+        frames = len(cache(clip, fps)[1])
+        if frames < window:
+            return f"{clip.path}: {role} clip of {frames} frames is shorter than one style window of {window}"
+    return ""
+
+
 def _pair_record(pair: Pair) -> dict:
     gt = pair.ground_truth
     return {
@@ -256,7 +265,9 @@ def evaluate(
          "ground_truth", "errors": {m: {...}} | "skipped": reason}]}
 
     where each error is the average over pairs of ``{"mean","worst","w25"}`` (None without pairs).
-    Pairs whose clips are shorter than one style window are skipped and counted.
+    Pairs whose content or style clip is shorter than one style window are skipped (not transferred) and
+    counted, as are transfers the model rejects with a DataError; a ground truth shorter than one window
+    gives no ground-truth errors for that pair.
     References: Kuriyama et al. 2022, §4.3, Tables 2 and 3.
     """
     from tqdm import tqdm
@@ -278,17 +289,25 @@ def evaluate(
     for pair in tqdm(found, desc=f"evaluate ({pairs})", unit="pair", disable=not progress):
         record = _pair_record(pair)
         record["errors"] = {}
+        fps = pair.content.motion.fps  # the result is on the content's rig, frame count and rate
+        window = metrics.window_for_fps(fps)
+        short = _too_short(pair, cache, fps, window)
         for method in methods:
-            result = model.transfer(pair.content.motion, pair.style.motion, method=method)
-            fps = result.fps
+            if short:
+                skipped[method] += 1
+                record["errors"][method] = {"skipped": short}
+                continue
             try:
-                gt = None if pair.ground_truth is None else cache(pair.ground_truth, fps)
+                result = model.transfer(pair.content.motion, pair.style.motion, method=method)
+                gt = None if pair.ground_truth is None else cache(pair.ground_truth, result.fps)
+                if gt is not None and len(gt[1]) < window:
+                    gt = None  # ground truth shorter than one window: no ground-truth errors for this pair
                 errs = features_errors(
-                    clip_features(result, fps),
-                    cache(pair.content, fps),
-                    cache(pair.style, fps),
+                    clip_features(result, result.fps),
+                    cache(pair.content, result.fps),
+                    cache(pair.style, result.fps),
                     gt,
-                    window=metrics.window_for_fps(fps),
+                    window=metrics.window_for_fps(result.fps),
                 )
             except DataError as e:
                 skipped[method] += 1

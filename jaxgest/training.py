@@ -202,7 +202,7 @@ class Checkpointer:
         got = jax.tree_util.tree_structure(params)
         if want != got:
             raise CheckpointError(f"{self.directory}: checkpoint parameters do not fit this model")
-        return jax.tree_util.tree_map(lambda t, x: np.asarray(x).astype(np.asarray(t).dtype), params_template, params)
+        return jax.tree_util.tree_map(lambda t, x: np.asarray(x).astype(t.dtype), params_template, params)
 
     def close(self) -> None:
         self.manager.wait_until_finished()

@@ -1,15 +1,41 @@
-"""Public TGST entry points (SPEC.md §7).
+"""Public TGST entry points (SPEC.md §7): parameter counts, loading a trained workdir, Motion-level transfer.
 
-``count_params(preset)`` is here; ``transfer(content: Motion, style: Motion, *, workdir, method)`` (the
-Motion-level API the CLI calls) is added by the lead on top of :func:`jaxgest.tgst.model.transfer_arrays`.
+* :func:`count_params` -- parameter counts of a fresh model of a preset (shapes only).
+* :func:`load_model` -- a :class:`TGSTModel` from a workdir written by ``jaxgest tgst train``.
+* :func:`transfer` -- ``transfer(content, style, *, workdir, method)``: what ``jaxgest tgst transfer`` calls.
+
+Transfer of two :class:`~jaxgest.motion.skeleton.Motion` clips on any mapped rig (Bandai-Namco, ZEGGS, the
+synthetic body), following §3.1 of the paper:
+
+1. both clips are resampled to the model rate (``cfg.fps``) and converted to the 21-joint body exp-maps with
+   the root's yaw about the vertical axis removed (:func:`jaxgest.motion.body.motion_to_body`);
+2. the jit-compiled :func:`jaxgest.tgst.model.transfer_arrays` (encode both, tokens, transformer, swap,
+   cross-fade, both decoders) gives upper and lower exp-maps of the content's length;
+3. the result is resampled back to the content's frame times (quaternion slerp), written onto the content's
+   skeleton with the content's root yaw and horizontal root path, and the root height is set so the lowest
+   foot/toe joint touches the floor (:func:`jaxgest.motion.body.body_to_motion`).
+
+The output has the content's skeleton, frame count and frame rate. Joints outside the 21-joint body (e.g.
+ZEGGS fingers) keep the content's rotations.
+References: Kuriyama et al. 2022, §3.1 and Fig. 2.
 """
 
 from __future__ import annotations
 
-import jax
+import functools
+import json
+import pathlib
+from typing import Optional
 
-from jaxgest.tgst.config import get_config
-from jaxgest.tgst.model import init_params
+import jax
+import numpy as np
+
+from jaxgest.errors import CheckpointError, DataError
+from jaxgest.motion import body, datasets
+from jaxgest.motion import rotations as R
+from jaxgest.motion.skeleton import Motion
+from jaxgest.tgst.config import TGSTConfig, config_from_dict, get_config
+from jaxgest.tgst.model import METHODS, init_params, transfer_arrays
 
 
 def count_params(preset: str = "paper") -> dict[str, int]:
@@ -20,3 +46,128 @@ def count_params(preset: str = "paper") -> dict[str, int]:
     cfg = get_config(preset)
     shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
     return {name: int(sum(x.size for x in jax.tree_util.tree_leaves(tree))) for name, tree in shapes.items()}
+
+
+@functools.lru_cache(maxsize=8)
+def compiled_transfer(cfg: TGSTConfig, method: str):
+    """``jax.jit`` of :func:`transfer_arrays` for one (config, method); one compilation per clip shape."""
+    return jax.jit(functools.partial(transfer_arrays, cfg=cfg, method=method))
+
+
+def _check_method(method: str) -> None:
+    if method not in METHODS:
+        raise DataError(f"unknown transfer method {method!r} (choose from {', '.join(METHODS)})")
+
+
+def _check_motion(m: Motion, what: str) -> None:
+    label = m.name or what
+    if not (np.all(np.isfinite(m.rotations)) and np.all(np.isfinite(m.translations))):
+        raise DataError(f"{label}: {what} motion contains NaN or inf values")
+
+
+def resample_body(x: np.ndarray, src_fps: float, dst_fps: float, frames: int) -> np.ndarray:
+    """Body exp-maps ``(F, 3J)`` at ``src_fps`` -> ``(frames, 3J)`` at the times ``k / dst_fps`` (slerp)."""
+    F = x.shape[0]
+    q = R.expmap_to_quat(np.asarray(x, np.float64).reshape(F, -1, 3))
+    pos = np.arange(frames) * (src_fps / dst_fps)
+    i0 = np.minimum(np.floor(pos).astype(int), F - 1)
+    i1 = np.minimum(i0 + 1, F - 1)
+    w = np.clip(pos - i0, 0.0, 1.0)
+    out = R.quat_slerp(q[i0], q[i1], np.broadcast_to(w[:, None], (frames, q.shape[1])))
+    return np.asarray(R.quat_to_expmap(out)).reshape(frames, -1)
+
+
+class TGSTModel:
+    """A trained TGST model: config and both parameter pytrees; ``transfer`` works on Motions.
+
+    Attributes:
+      cfg: the :class:`TGSTConfig` the workdir was trained with (windows fitted to its data).
+      params: ``{"autoencoder": ..., "transformer": ...}``.
+      workdir: where it was loaded from (None when built from parameters).
+    """
+
+    def __init__(self, cfg: TGSTConfig, params: dict, workdir=None):
+        self.cfg, self.params, self.workdir = cfg, params, workdir
+
+    def min_frames(self, fps: float) -> int:
+        """Shortest clip (frames at ``fps``) the model accepts: one token (16 frames) at the model rate."""
+        return int(np.ceil(self.cfg.min_frames * fps / self.cfg.fps))
+
+    def body_arrays(self, motion: Motion, what: str) -> np.ndarray:
+        """A clip -> upper-body exp-maps ``(F', 39)`` float32 at the model rate (clear errors)."""
+        _check_motion(motion, what)
+        label = motion.name or what
+        m = datasets.resample_motion(motion, self.cfg.fps)
+        if m.num_frames < self.cfg.min_frames:
+            raise DataError(f"{label}: {what} clip too short: {motion.num_frames} frames at {motion.fps:g} fps "
+                            f"({m.num_frames} at the model's {self.cfg.fps:g} fps); TGST needs at least "
+                            f"{self.min_frames(motion.fps)} frames ({self.cfg.min_frames} at {self.cfg.fps:g} fps)")
+        try:
+            return body.motion_to_body(m).upper.astype(np.float32)
+        except KeyError as e:
+            raise DataError(f"{label}: {what} skeleton does not fit any joint map ({e})") from None
+
+    def transfer_body(self, content_upper: np.ndarray, style_upper: np.ndarray, method: str = "soft"):
+        """Arrays at the model rate: ``(Fc, 39)``, ``(Fs, 39)`` -> (upper ``(Fc, 39)``, lower ``(Fc, 24)``)."""
+        _check_method(method)
+        fn = compiled_transfer(self.cfg, method)
+        up, lo, _ = fn(self.params, np.asarray(content_upper)[None], np.asarray(style_upper)[None])
+        return np.asarray(up[0]), np.asarray(lo[0])
+
+    def transfer(self, content: Motion, style: Motion, method: str = "soft", name: Optional[str] = None) -> Motion:
+        """``content`` performed in the style of ``style``, on the content's skeleton (module docstring)."""
+        _check_method(method)
+        cu = self.body_arrays(content, "content")
+        su = self.body_arrays(style, "style")
+        up, lo = self.transfer_body(cu, su, method)
+        F = content.num_frames
+        up = resample_body(up, self.cfg.fps, content.fps, F)
+        lo = resample_body(lo, self.cfg.fps, content.fps, F)
+        out = body.body_to_motion(up, lo, content, floor=True)
+        return out.replace(name=name or f"{content.name or 'content'} in the style of {style.name or 'style'}")
+
+
+def load_model(workdir) -> TGSTModel:
+    """Load the latest autoencoder and transformer checkpoints of a ``jaxgest tgst train`` workdir.
+
+    Raises CheckpointError when the workdir has no config.json or no checkpoint of either stage, or when the
+    checkpoints do not match its config.
+    """
+    from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
+
+    workdir = pathlib.Path(workdir)
+    cfg_path = workdir / "config.json"
+    if not cfg_path.is_file():
+        raise CheckpointError(f"{workdir}: not a TGST workdir (no config.json; run 'jaxgest tgst train' first)")
+    try:
+        stored = json.loads(cfg_path.read_text())
+        cfg = config_from_dict(stored["config"])
+    except (ValueError, KeyError, TypeError) as e:
+        raise CheckpointError(f"{cfg_path}: unreadable TGST config ({type(e).__name__}: {e})") from None
+    if stored.get("kind", "tgst") != "tgst":
+        raise CheckpointError(f"{workdir}: a {stored.get('kind')} workdir, not a TGST one")
+    template = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))  # shapes only
+    ae_ck = ae_checkpointer(workdir, cfg, read_only=True)
+    ae = ae_ck.restore_params(template["autoencoder"])
+    ae_ck.close()
+    tr_ck = transformer_checkpointer(workdir, cfg, None, read_only=True)
+    tr = tr_ck.restore_params(template["transformer"])
+    tr_ck.close()
+    return TGSTModel(cfg, {"autoencoder": ae, "transformer": tr}, workdir)
+
+
+@functools.lru_cache(maxsize=4)
+def _cached_model(workdir: str, mtime: float) -> TGSTModel:
+    return load_model(workdir)
+
+
+def transfer(content: Motion, style: Motion, *, workdir, method: str = "soft") -> Motion:
+    """Style transfer of two Motions with the model of ``workdir`` (SPEC §7); see :class:`TGSTModel`."""
+    _check_method(method)
+    path = pathlib.Path(workdir)
+    cfg = path / "config.json"
+    mtime = cfg.stat().st_mtime if cfg.is_file() else 0.0
+    return _cached_model(str(path.resolve()), mtime).transfer(content, style, method=method)
+
+
+__all__ = ["METHODS", "TGSTModel", "compiled_transfer", "count_params", "load_model", "resample_body", "transfer"]

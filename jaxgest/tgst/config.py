@@ -13,6 +13,11 @@ Presets (``get_config(name)``):
   transformer window 128, batch 4) and Adam 1e-3 so tests and ``jaxgest demo --quick`` train in seconds
   to a minute on a CPU. Not the paper's training setup.
 
+Training windows are scaled to the data (:func:`jaxgest.tgst.data.fit_windows`): each window is
+``min(preset window, median clip length at cfg.fps rounded down to a multiple of 16)``, so the
+Bandai-Namco clips (30 fps, mostly 4-15 s, resampled to 60 fps) train with the ``paper`` preset; the
+windows actually used are stored in the workdir's config.json and checkpoints.
+
 Every config is a frozen (hashable, usable as a jit static argument) dataclass of JSON-friendly fields:
 ``dataclasses.asdict(cfg)`` is stored with checkpoints and :func:`config_from_dict` rebuilds it.
 """
@@ -71,6 +76,7 @@ class TGSTConfig:
     """Everything the TGST model and its two trainings need."""
 
     name: str = "paper"  # preset name, informational
+    fps: float = 60.0  # model frame rate: every clip is resampled to it (the paper's capture rate, §4.1)
     autoencoder: AutoencoderConfig = AutoencoderConfig()  # motion <-> latent autoencoder
     transformer: TransformerConfig = TransformerConfig()  # token encoder/decoder
     token_width: int = 4  # w: latent frames per gesture token (eq. 1)

@@ -1,0 +1,74 @@
+"""``jaxgest tgst train | transfer | evaluate`` (SPEC §6)."""
+
+from __future__ import annotations
+
+import pathlib
+
+from jaxgest.errors import DataError
+from jaxgest.tgst.model import METHODS
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("tgst", help="tokenized gesture style transfer (Kuriyama et al. 2022)")
+    sub = p.add_subparsers(dest="tgst_command", metavar="COMMAND")
+    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+
+    t = sub.add_parser("train", help="train (or resume) the autoencoder, then the style transformer")
+    t.add_argument("--data", required=True, help="folder: Bandai-Namco files, ZEGGS layout or manifest.csv")
+    t.add_argument("--workdir", required=True, help="run folder (config.json, checkpoints, metrics.jsonl)")
+    t.add_argument("--preset", default="tiny", choices=("tiny", "paper"))
+    t.add_argument("--steps", type=int, default=None,
+                   help="steps of EACH stage (default: tiny 200, paper 10000); see also --ae-steps")
+    t.add_argument("--ae-steps", type=int, default=None, help="autoencoder steps (overrides --steps)")
+    t.add_argument("--transformer-steps", type=int, default=None, help="transformer steps (overrides --steps)")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
+    t.add_argument("--ckpt-every", type=int, default=500, help="checkpoint every N steps (and at the end)")
+    t.add_argument("--log-every", type=int, default=50, help="metrics.jsonl line every N steps")
+    t.add_argument("--ablate", default=None, metavar="TERM[,TERM]",
+                   help="switch loss terms off (identity, cyclic, structure, appearance): paper Table 4")
+    t.set_defaults(func=_train)
+
+    x = sub.add_parser("transfer", help="perform a content clip in the style of a style clip")
+    x.add_argument("--workdir", required=True, help="trained TGST workdir")
+    x.add_argument("--content", required=True, metavar="C.bvh")
+    x.add_argument("--style", required=True, metavar="S.bvh")
+    x.add_argument("--out", required=True, metavar="O.bvh", help="output BVH (content's skeleton and length)")
+    x.add_argument("--method", default="soft", choices=METHODS,
+                   help="soft swap (paper), hard swap, AdaIN or Avatar-net baselines")
+    x.set_defaults(func=_transfer)
+
+    from jaxgest.tgst.evaluate import register_evaluate
+
+    register_evaluate(sub)
+
+
+def _train(args) -> int:
+    from jaxgest.tgst.train import format_summary, train
+
+    ae = args.ae_steps if args.ae_steps is not None else args.steps
+    tr = args.transformer_steps if args.transformer_steps is not None else args.steps
+    ablate = tuple(a.strip() for a in args.ablate.split(",") if a.strip()) if args.ablate else ()
+    summary = train(args.data, args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr,
+                    seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
+                    ablate=ablate)
+    print(format_summary(summary))
+    return 0
+
+
+def _transfer(args) -> int:
+    from jaxgest.io import check_output_path
+    from jaxgest.motion import bvh
+    from jaxgest.tgst.api import load_model
+
+    out = check_output_path(args.out)
+    for path in (args.content, args.style):
+        if not pathlib.Path(path).is_file():
+            raise DataError(f"{path}: no such file")
+    content, style = bvh.load(args.content), bvh.load(args.style)
+    model = load_model(args.workdir)
+    result = model.transfer(content, style, method=args.method, name=out.stem)
+    bvh.save(result, out)
+    print(f"tgst: wrote {out} ({result.num_frames} frames at {result.fps:g} fps, {args.method} swap of "
+          f"{pathlib.Path(args.content).name} in the style of {pathlib.Path(args.style).name})")
+    return 0

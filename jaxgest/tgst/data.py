@@ -1,0 +1,182 @@
+"""TGST training data: dataset clips -> body exp-maps at the model rate, and deterministic batches.
+
+* :func:`prepare_clips` -- every clip of :func:`jaxgest.motion.datasets.load_folder` is resampled
+  explicitly to ``cfg.fps`` (Bandai-Namco is 30 fps, the synthetic data 60 fps, the paper's 60 fps),
+  converted by :func:`jaxgest.motion.body.motion_to_body` (root yaw removed) to upper ``(F, 39)`` and
+  lower ``(F, 24)`` float32 exp-maps, and mirrored once (:func:`jaxgest.motion.kinematics.mirror`) for the
+  style augmentation.
+* :func:`fit_windows` -- windows scaled to the data. The paper's windows (256 / 1280 frames at 60 fps) are
+  longer than many Bandai-Namco clips (4-15 s), and padding would teach the models frozen tails, so each
+  window is ``min(preset window, median usable clip length rounded down to a multiple of 16)``: at least
+  half of the clips then contribute windows. DataError when the longest clip is shorter than one token
+  (16 frames), or when fewer than two clips are usable for content/style pairs.
+* :func:`ae_batch` -- autoencoder batches: windows uniform over all valid (clip, start) pairs of the
+  original AND the mirrored clips (mirrored poses are fed to the encoder at transfer time, so the
+  autoencoder sees them too; the paper does not say whether its AE data was mirrored).
+* :func:`transformer_batch` -- random UNALIGNED content/style pairs: two different clips drawn uniformly
+  (§4.1, "randomly and evenly sampled"), a random window of each, the style mirrored with probability 0.5.
+
+Every batch is a pure function of ``(seed, step)`` (``numpy.random.default_rng([seed, stage, step])``), so a
+killed run resumes bit-identically.
+References: Kuriyama et al. 2022, §3.5 and §4.1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Optional, Sequence
+
+import numpy as np
+
+from jaxgest.errors import DataError
+from jaxgest.motion import body, datasets, kinematics
+from jaxgest.motion.skeleton import Motion
+from jaxgest.tgst.config import TGSTConfig
+
+AE_STAGE, TRANSFORMER_STAGE = 1, 2  # stream ids of the two stages' random batches
+#: what every TGST checkpoint was trained on (compared on restore)
+BODY_SIGNATURE = f"tgst-body21(upper{body.UPPER_CHANNELS},lower{body.LOWER_CHANNELS}):" + ",".join(body.BODY)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class BodyData:
+    """Clips in the body representation at the model rate.
+
+    Attributes:
+      upper / lower: lists of ``(F_i, 39)`` / ``(F_i, 24)`` float32 arrays, one per clip.
+      mirrored_upper / mirrored_lower: the same clips mirrored about the sagittal plane.
+      names: clip labels (file paths) for error messages.
+      fps: the model rate.
+    """
+
+    upper: list
+    lower: list
+    mirrored_upper: list
+    mirrored_lower: list
+    names: list
+    fps: float
+
+    @property
+    def lengths(self) -> np.ndarray:
+        return np.array([u.shape[0] for u in self.upper], dtype=np.int64)
+
+
+def motion_to_arrays(motion: Motion, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """A motion on any mapped rig -> (upper ``(F, 39)``, lower ``(F, 24)``) float32 at ``fps``."""
+    bc = body.motion_to_body(datasets.resample_motion(motion, fps))
+    return bc.upper.astype(np.float32), bc.lower.astype(np.float32)
+
+
+def prepare_clips(clips: Sequence, cfg: TGSTConfig) -> BodyData:
+    """Dataset clips (``Clip`` or ``Motion``) -> :class:`BodyData` at ``cfg.fps`` with mirrored copies."""
+    if not len(clips):
+        raise DataError("TGST data: no clips")
+    up, lo, mup, mlo, names = [], [], [], [], []
+    for i, c in enumerate(clips):
+        motion = c.motion if isinstance(c, datasets.Clip) else c
+        name = str(c.path) if isinstance(c, datasets.Clip) else (motion.name or f"clip {i}")
+        u, l = motion_to_arrays(motion, cfg.fps)
+        mu, ml = motion_to_arrays(kinematics.mirror(motion), cfg.fps)
+        up.append(u), lo.append(l), mup.append(mu), mlo.append(ml), names.append(name)
+    return BodyData(up, lo, mup, mlo, names, float(cfg.fps))
+
+
+def load_body_data(data_dir, cfg: TGSTConfig, progress: bool = False) -> BodyData:
+    """:func:`prepare_clips` of every clip in ``data_dir`` (any layout of ``load_folder``)."""
+    return prepare_clips(datasets.load_folder(data_dir, progress=progress), cfg)
+
+
+def _fit(window: int, lengths: np.ndarray, names: Sequence[str], multiple: int, min_frames: int,
+         min_clips: int, what: str) -> int:
+    longest = int(np.argmax(lengths))
+    if lengths[longest] < min_frames:
+        raise DataError(f"no clip is long enough for a {min_frames}-frame {what} window: the longest, "
+                        f"{names[longest]}, has {lengths[longest]} frames at the model rate")
+    usable = np.sort(lengths[lengths >= min_frames])
+    if len(usable) < min_clips:
+        raise DataError(f"{what} training needs at least {min_clips} clips of >= {min_frames} frames at the "
+                        f"model rate; found {len(usable)} (longest: {names[longest]})")
+    median = int(usable[(len(usable) - 1) // 2])
+    fitted = max(min_frames, median // multiple * multiple)
+    return int(min(window, fitted))
+
+
+def fit_windows(cfg: TGSTConfig, data: BodyData) -> TGSTConfig:
+    """``cfg`` with ``ae_window`` / ``transformer_window`` scaled to the data (see the module docstring).
+
+    Windows stay multiples of 16 frames (the encoder's x4 reduction and the token stride) and never grow.
+    """
+    lengths, m = data.lengths, cfg.frame_multiple
+    ae = _fit(cfg.ae_window, lengths, data.names, m, cfg.min_frames, 1, "autoencoder")
+    tr = _fit(cfg.transformer_window, lengths, data.names, m, cfg.min_frames, 2, "transformer")
+    return dataclasses.replace(cfg, ae_window=ae, transformer_window=tr)
+
+
+def _rng(seed: int, stage: int, step: int) -> np.random.Generator:
+    return np.random.default_rng([int(seed), int(stage), int(step)])
+
+
+def ae_batch(data: BodyData, cfg: TGSTConfig, seed: int, step: int) -> dict:
+    """``{"upper": (B, W, 39), "lower": (B, W, 24)}`` float32 windows of original and mirrored clips.
+
+    Uniform over all valid (clip, start) pairs of both sets; B = ``cfg.ae_batch_size``, W = ``cfg.ae_window``.
+    """
+    rng = _rng(seed, AE_STAGE, step)
+    uppers = data.upper + data.mirrored_upper
+    lowers = data.lower + data.mirrored_lower
+    w = sample_windows_idx(np.concatenate([data.lengths, data.lengths]), cfg.ae_window, cfg.ae_batch_size, rng,
+                           data.names + data.names)
+    up = np.stack([uppers[i][s:s + cfg.ae_window] for i, s in w])
+    lo = np.stack([lowers[i][s:s + cfg.ae_window] for i, s in w])
+    return {"upper": up, "lower": lo}
+
+
+def sample_windows_idx(lengths: np.ndarray, length: int, batch: int, rng: np.random.Generator,
+                       names: Sequence[str]) -> list[tuple[int, int]]:
+    """``batch`` (clip, start) pairs uniform over the valid windows (DataError naming the longest clip)."""
+    valid = np.maximum(lengths - length + 1, 0)
+    if valid.sum() == 0:
+        hi = int(np.argmax(lengths))
+        raise DataError(f"no clip is long enough for a {length}-frame window: the longest, {names[hi]}, has "
+                        f"{lengths[hi]} frames at the model rate")
+    index = rng.choice(len(lengths), size=batch, p=valid / valid.sum())
+    return [(int(i), int(rng.integers(0, valid[i]))) for i in index]
+
+
+def transformer_batch(data: BodyData, cfg: TGSTConfig, seed: int, step: int,
+                      mirror_prob: float = 0.5) -> dict:
+    """``{"content": (B, W, 39), "style": (B, W, 39)}`` of unaligned pairs of different clips.
+
+    Content and style clips are drawn uniformly among clips of at least W = ``cfg.transformer_window``
+    frames (two different clips per pair), each window starts uniformly at random, and the style window is
+    taken from the mirrored clip with probability ``mirror_prob`` (style augmentation, §4.1).
+    References: Kuriyama et al. 2022, §3.5 ("no behavioral synchronization or time alignment").
+    """
+    rng = _rng(seed, TRANSFORMER_STAGE, step)
+    w, b = cfg.transformer_window, cfg.transformer_batch_size
+    usable = np.flatnonzero(data.lengths >= w)
+    if len(usable) < 2:
+        hi = int(np.argmax(data.lengths))
+        raise DataError(f"content/style pairs need two clips of >= {w} frames; the longest, {data.names[hi]}, "
+                        f"has {data.lengths[hi]} frames at the model rate")
+    content, style = [], []
+    for _ in range(b):
+        ci, si = rng.choice(usable, size=2, replace=False)
+        cs = int(rng.integers(0, data.lengths[ci] - w + 1))
+        ss = int(rng.integers(0, data.lengths[si] - w + 1))
+        mirrored = bool(rng.random() < mirror_prob)
+        content.append(data.upper[ci][cs:cs + w])
+        style.append((data.mirrored_upper if mirrored else data.upper)[si][ss:ss + w])
+    return {"content": np.stack(content), "style": np.stack(style)}
+
+
+def describe(data: BodyData, cfg: Optional[TGSTConfig] = None) -> dict:
+    """JSON-friendly summary: clip count, frames, lengths and (with ``cfg``) the windows used."""
+    lengths = data.lengths
+    out = {"clips": len(lengths), "frames": int(lengths.sum()), "fps": data.fps,
+           "shortest": int(lengths.min()), "longest": int(lengths.max()), "median": float(np.median(lengths))}
+    if cfg is not None:
+        out.update(ae_window=cfg.ae_window, transformer_window=cfg.transformer_window,
+                   ae_window_clips=int((lengths >= cfg.ae_window).sum()),
+                   transformer_window_clips=int((lengths >= cfg.transformer_window).sum()))
+    return out

@@ -1,0 +1,236 @@
+"""Train TGST: stage 1 the motion autoencoder, stage 2 the style transformer with the autoencoder frozen.
+
+``train(data_dir, workdir, preset=...)`` is what ``jaxgest tgst train`` calls. Layout of a workdir::
+
+    config.json                      preset, effective config (windows fitted to the data), data, devices
+    metrics.jsonl                    one line per log step: {"stage", "step", "loss", ..., "devices", ...}
+    checkpoints/autoencoder/<step>   orbax {params, opt_state, step} + meta (kind tgst_autoencoder)
+    checkpoints/transformer/<step>   the same for the transformer (kind tgst_transformer)
+
+Both stages use optax Adam (§3.5), one jit-compiled step each (:func:`jaxgest.parallel.parallelize_step`,
+state donated, batch split over the devices) and :func:`jaxgest.training.train_loop` (NaN stop, tqdm,
+checkpoints). A run resumes from the latest checkpoint of each stage; a finished autoencoder is not
+retrained. The transformer's checkpoint records the autoencoder step it was trained on: resuming it on a
+different autoencoder raises CheckpointError (use a new workdir).
+
+Default step counts (``DEFAULT_STEPS``): tiny 200 + 200; paper 10,000 + 10,000 (about the paper's 1000
+epochs of its 21 min of AE data in batches of 32 x 256 frames, and of its 63 content/style pairs in batches
+of 8). References: Kuriyama et al. 2022, §3.5, §4.1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import pathlib
+import time
+from typing import Optional
+
+import jax
+import jax.numpy as jnp
+import optax
+
+from jaxgest import parallel, training
+from jaxgest.errors import DataError, JaxgestError
+from jaxgest.tgst import data as tdata
+from jaxgest.tgst.config import TGSTConfig, get_config
+from jaxgest.tgst.model import init_params
+from jaxgest.tgst.steps import (create_ae_state, create_transformer_state, make_ae_train_step,
+                                make_transformer_train_step)
+
+DEFAULT_STEPS = {"tiny": (200, 200), "paper": (10_000, 10_000)}
+AE_KIND, TRANSFORMER_KIND = "tgst_autoencoder", "tgst_transformer"
+AE_SUBDIR, TRANSFORMER_SUBDIR = "checkpoints/autoencoder", "checkpoints/transformer"
+PRESETS = tuple(DEFAULT_STEPS)
+
+
+def resolve_preset(preset: str) -> TGSTConfig:
+    if preset not in PRESETS:
+        raise JaxgestError(f"unknown TGST preset {preset!r} (choose from {', '.join(PRESETS)})")
+    return get_config(preset)
+
+
+LOSS_TERMS = ("identity", "cyclic", "structure", "appearance")
+#: config keys the autoencoder does not depend on: a stage-1 checkpoint can be shared by runs that differ only
+#: in them (the loss ablations of Table 4 reuse one autoencoder)
+AE_IGNORED = ("steps", "name", "transformer", "transformer_learning_rate", "transformer_batch_size",
+              "transformer_window", "swap_temperature") + tuple(f"use_{t}" for t in LOSS_TERMS) + tuple(
+              f"lambda_{t}" for t in LOSS_TERMS)
+
+
+def apply_ablation(cfg: TGSTConfig, ablate=()) -> TGSTConfig:
+    """``cfg`` with the named transformer loss terms switched off (paper Table 4); clear error otherwise."""
+    ablate = tuple(ablate or ())
+    unknown = [a for a in ablate if a not in LOSS_TERMS]
+    if unknown:
+        raise JaxgestError(f"unknown loss term {unknown[0]!r} to ablate (choose from {', '.join(LOSS_TERMS)})")
+    if set(ablate) == set(LOSS_TERMS):
+        raise JaxgestError("cannot ablate every loss term: the transformer would have nothing to learn")
+    return dataclasses.replace(cfg, **{f"use_{a}": False for a in ablate})
+
+
+def ae_checkpointer(workdir, cfg: TGSTConfig, read_only: bool = False) -> training.Checkpointer:
+    return training.Checkpointer(workdir, kind=AE_KIND, config=dataclasses.asdict(cfg),
+                                 skeleton=tdata.BODY_SIGNATURE, subdir=AE_SUBDIR, read_only=read_only,
+                                 ignore=AE_IGNORED)
+
+
+def transformer_checkpointer(workdir, cfg: TGSTConfig, ae_step: Optional[int],
+                             read_only: bool = False) -> training.Checkpointer:
+    config = dict(dataclasses.asdict(cfg), autoencoder_step=ae_step)
+    ignore = ("steps",) if ae_step is not None else ("steps", "autoencoder_step")
+    return training.Checkpointer(workdir, kind=TRANSFORMER_KIND, config=config, skeleton=tdata.BODY_SIGNATURE,
+                                 subdir=TRANSFORMER_SUBDIR, read_only=read_only, ignore=ignore)
+
+
+@functools.lru_cache(maxsize=None)
+def _jitted_init():
+    return jax.jit(init_params, static_argnames="cfg")
+
+
+@functools.lru_cache(maxsize=8)
+def compiled_ae_step(cfg: TGSTConfig, mesh):
+    """The jit-compiled, data-parallel autoencoder step of ``cfg`` on ``mesh`` and its optimizer.
+
+    Memoised so several trainings in one process (resume, tests) compile each step once.
+    """
+    tx = optax.adam(cfg.ae_learning_rate)
+    return parallel.parallelize_step(make_ae_train_step(cfg, tx), mesh), tx
+
+
+@functools.lru_cache(maxsize=8)
+def compiled_transformer_step(cfg: TGSTConfig, mesh):
+    """The jit-compiled transformer step ``(state, batch, key, ae_params) -> (state, metrics)`` and tx.
+
+    :func:`jaxgest.tgst.steps.make_transformer_train_step` closes over the frozen autoencoder; here the
+    autoencoder parameters are a (replicated, not differentiated) argument instead, so one compilation
+    serves every autoencoder (resumed runs, tests). Same shardings as
+    :func:`jaxgest.parallel.parallelize_step`, state donated.
+    """
+    tx = optax.adam(cfg.transformer_learning_rate)
+
+    def step(state, batch, key, ae_params):
+        return make_transformer_train_step(cfg, tx, ae_params)(state, batch, key)
+
+    rep, data = parallel.replicated(mesh), parallel.data_sharding(mesh)
+    jitted = jax.jit(step, in_shardings=(rep, data, rep, rep), out_shardings=(rep, rep), donate_argnums=(0,))
+    return jitted, tx
+
+
+def _int32_step(state):
+    """A non-weak int32 step so a restored state has the same avals (no recompilation)."""
+    return state.replace(step=jnp.zeros((), jnp.int32))
+
+
+def _check_existing(ckpt: training.Checkpointer) -> None:
+    stored = ckpt.stored_meta()
+    if stored is not None:
+        ckpt.check_meta(stored)
+
+
+def _check_batch(batch_size: int, mesh, what: str) -> None:
+    if batch_size % mesh.size:
+        raise JaxgestError(f"{what} batch size {batch_size} does not divide over {mesh.size} devices; "
+                           "use --devices with a divisor of it")
+
+
+def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = None,
+          transformer_steps: Optional[int] = None, seed: int = 0, devices: Optional[int] = None,
+          progress: bool = True, log_every: int = 50, ckpt_every: int = 500, ablate=()) -> dict:
+    """Train (or resume) both TGST stages on ``data_dir`` into ``workdir``; returns a summary dict.
+
+    Summary: ``{"workdir", "preset", "ae": {"steps", "start_step", "loss", "angle_deg", "wall_s",
+    "steps_per_s"}, "transformer": {...same, with the loss terms}, "wall_s", "devices", "windows"}``.
+    """
+    t0 = time.perf_counter()
+    parallel.maybe_initialize_distributed()
+    cfg0 = apply_ablation(resolve_preset(preset), ablate)
+    d_ae, d_tr = DEFAULT_STEPS[preset]
+    ae_steps = d_ae if ae_steps is None else int(ae_steps)
+    transformer_steps = d_tr if transformer_steps is None else int(transformer_steps)
+    if ae_steps < 0 or transformer_steps < 0:
+        raise JaxgestError("step counts must be >= 0")
+    workdir = pathlib.Path(workdir)
+    if workdir.exists() and not workdir.is_dir():
+        raise DataError(f"{workdir}: exists and is not a directory")
+    mesh = parallel.make_mesh(devices)
+    info = parallel.device_info(mesh)
+
+    body_data = tdata.load_body_data(data_dir, cfg0, progress=progress)
+    cfg = tdata.fit_windows(cfg0, body_data)
+    _check_batch(cfg.ae_batch_size, mesh, "autoencoder")
+    _check_batch(cfg.transformer_batch_size, mesh, "transformer")
+    workdir.mkdir(parents=True, exist_ok=True)
+
+    # Check both stages' checkpoints before writing anything (another preset must not load silently).
+    ae_ckpt = ae_checkpointer(workdir, cfg)
+    _check_existing(ae_ckpt)
+    config_json = {"kind": "tgst", "preset": preset, "config": dataclasses.asdict(cfg), "data": str(pathlib.Path(data_dir)),
+                   "data_summary": tdata.describe(body_data, cfg), "seed": int(seed), **info,
+                   "skeleton": tdata.BODY_SIGNATURE}
+    if jax.process_index() == 0:
+        training.write_json_atomic(workdir / "config.json", config_json)
+
+    key = jax.random.PRNGKey(seed)
+    params0 = _jitted_init()(cfg=cfg, key=key)
+    summary = {"workdir": str(workdir), "preset": preset, "devices": info["devices"],
+               "windows": {"ae": cfg.ae_window, "transformer": cfg.transformer_window}}
+
+    # ---- stage 1: autoencoder
+    ae_step_fn, tx_ae = compiled_ae_step(cfg, mesh)
+    ae_state = parallel.replicate(_int32_step(create_ae_state(cfg, params0["autoencoder"], tx_ae)), mesh)
+    ae_state = ae_ckpt.restore(ae_state)
+    ae_logger = training.MetricsLogger(workdir, extra={"stage": "autoencoder", **info})
+    last = {}
+    ae_state, summary["ae"] = _run_stage(
+        ae_state, ae_step_fn, lambda i: tdata.ae_batch(body_data, cfg, seed, i), mesh,
+        key=key, num_steps=ae_steps, checkpointer=ae_ckpt, logger=ae_logger, desc="tgst autoencoder",
+        progress=progress, log_every=log_every, ckpt_every=ckpt_every, last=last)
+    ae_done = int(jax.device_get(ae_state.step))
+    ae_params = parallel.replicate(jax.device_get(ae_state.params), mesh)
+    ae_ckpt.close()
+
+    # ---- stage 2: transformer (autoencoder frozen, closed over by the step)
+    tr_ckpt = transformer_checkpointer(workdir, cfg, ae_done)
+    tr_step_fn, tx_tr = compiled_transformer_step(cfg, mesh)
+    tr_state = parallel.replicate(
+        _int32_step(create_transformer_state(cfg, params0["transformer"], tx_tr)), mesh)
+    tr_state = tr_ckpt.restore(tr_state)
+    tr_logger = training.MetricsLogger(workdir, extra={"stage": "transformer", **info})
+    tr_state, summary["transformer"] = _run_stage(
+        tr_state, lambda st, b, k: tr_step_fn(st, b, k, ae_params),
+        lambda i: tdata.transformer_batch(body_data, cfg, seed, i), mesh, key=key,
+        num_steps=transformer_steps, checkpointer=tr_ckpt, logger=tr_logger, desc="tgst transformer",
+        progress=progress, log_every=log_every, ckpt_every=ckpt_every, last={})
+    tr_ckpt.close()
+    summary["wall_s"] = time.perf_counter() - t0
+    return summary
+
+
+def _run_stage(state, step_fn, batch_fn, mesh, *, key, num_steps, checkpointer, logger, desc, progress,
+               log_every, ckpt_every, last):
+    start = int(jax.device_get(state.step))
+    t = time.perf_counter()
+    if start < num_steps:
+        state = training.train_loop(
+            state, step_fn, parallel.sharded_batch_fn(batch_fn, mesh),
+            key=key, num_steps=num_steps, checkpointer=checkpointer, logger=logger,
+            log_every=max(1, min(log_every, num_steps)), ckpt_every=ckpt_every, desc=desc, progress=progress,
+            on_log=lambda s, m: last.update(m))
+    wall = time.perf_counter() - t
+    done = int(jax.device_get(state.step))
+    ran = max(done - start, 0)
+    out = {"steps": done, "start_step": start, "wall_s": wall, "steps_per_s": ran / wall if ran and wall else 0.0}
+    out.update({k: v for k, v in last.items() if k != "steps_per_s"})
+    return state, out
+
+
+def format_summary(s: dict) -> str:
+    """One line for the CLI."""
+    def part(name, d):
+        loss = f"loss {d['loss']:.4g}" if "loss" in d else "resumed, nothing to do"
+        extra = f" ({d['angle_deg']:.2f} deg)" if "angle_deg" in d else ""
+        return f"{name} {d['steps']} steps {loss}{extra}, {d['steps_per_s']:.1f} steps/s"
+    return (f"tgst train ({s['preset']}, {s['devices']} device(s), windows {s['windows']['ae']}/"
+            f"{s['windows']['transformer']}): {part('autoencoder', s['ae'])}; "
+            f"{part('transformer', s['transformer'])}; {s['wall_s']:.1f} s -> {s['workdir']}")

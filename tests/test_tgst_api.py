@@ -1,0 +1,177 @@
+"""TGST end to end on tiny synthetic data: train both stages, resume, transfer (API + CLI), evaluate, errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from jaxgest import cli
+from jaxgest.errors import CheckpointError, DataError, JaxgestError
+from jaxgest.motion import bvh, datasets, kinematics
+from jaxgest.motion.synthetic import write_dataset
+
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    from jaxgest.tgst.train import train
+
+    root = tmp_path_factory.mktemp("tgst")
+    data = root / "data"
+    write_dataset(data, clips=4, seconds=3, progress=False)
+    work = root / "work"
+    summary = train(data, work, preset="tiny", ae_steps=4, transformer_steps=4, progress=False, log_every=2,
+                    ckpt_every=2)
+    return data, work, summary
+
+
+@pytest.fixture(scope="module")
+def model(trained):
+    from jaxgest.tgst.api import load_model
+
+    return load_model(trained[1])
+
+
+def _clips(data):
+    return sorted(data.glob("*.bvh"))
+
+
+def test_train_writes_config_metrics_checkpoints(trained):
+    data, work, summary = trained
+    cfg = json.loads((work / "config.json").read_text())
+    assert cfg["kind"] == "tgst" and cfg["preset"] == "tiny" and cfg["devices"] == 1
+    lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
+    stages = [(r["stage"], r["step"]) for r in lines]
+    assert stages == [("autoencoder", 2), ("autoencoder", 4), ("transformer", 2), ("transformer", 4)]
+    assert all(np.isfinite(r["loss"]) for r in lines)
+    assert summary["ae"]["steps"] == 4 and summary["transformer"]["steps"] == 4
+    assert (work / "checkpoints/autoencoder").is_dir() and (work / "checkpoints/transformer").is_dir()
+
+
+def test_resume_continues_from_saved_steps(trained, tmp_path):
+    from jaxgest.tgst.train import train
+
+    data, work, _ = trained
+    copy = tmp_path / "w"
+    shutil.copytree(work, copy)
+    again = train(data, copy, preset="tiny", ae_steps=4, transformer_steps=6, progress=False, log_every=2,
+                  ckpt_every=2)
+    assert again["ae"]["start_step"] == 4 and again["ae"]["steps"] == 4  # finished stage 1 not retrained
+    assert again["transformer"]["start_step"] == 4 and again["transformer"]["steps"] == 6
+
+
+def test_other_preset_on_same_workdir_is_refused(trained, tmp_path):
+    from jaxgest.tgst.train import train
+
+    data, work, _ = trained
+    copy = tmp_path / "w"
+    shutil.copytree(work, copy)
+    before = (copy / "config.json").read_text()
+    with pytest.raises(CheckpointError, match="does not match"):
+        train(data, copy, preset="paper", ae_steps=1, transformer_steps=1, progress=False)
+    assert (copy / "config.json").read_text() == before  # nothing overwritten
+
+
+def test_ablation_validated():
+    from jaxgest.tgst.config import get_config
+    from jaxgest.tgst.train import apply_ablation
+
+    cfg = apply_ablation(get_config("tiny"), ["cyclic", "structure"])
+    assert not cfg.use_cyclic and not cfg.use_structure and cfg.use_identity and cfg.use_appearance
+    with pytest.raises(JaxgestError, match="unknown loss term"):
+        apply_ablation(get_config("tiny"), ["style"])
+
+
+@pytest.mark.parametrize("method", ["soft", "hard", "adain", "avatarnet"])
+def test_transfer_all_methods_keep_content_skeleton_and_length(trained, model, method):
+    data, _, _ = trained
+    content, style = (bvh.load(p) for p in _clips(data)[:2])
+    out = model.transfer(content, style, method=method)
+    assert out.skeleton.names == content.skeleton.names and out.num_frames == content.num_frames
+    assert out.fps == content.fps and np.all(np.isfinite(out.rotations))
+    pos = kinematics.forward_kinematics(out)
+    feet = kinematics.foot_joints(out.skeleton)
+    np.testing.assert_allclose(pos[:, feet, 1].min(axis=1), 0.0, atol=1e-6)  # floor contact
+
+
+def test_transfer_is_deterministic_and_soft_differs_from_content(trained, model):
+    data, _, _ = trained
+    content, style = (bvh.load(p) for p in _clips(data)[:2])
+    a = model.transfer(content, style)
+    b = model.transfer(content, style)
+    np.testing.assert_array_equal(a.rotations, b.rotations)
+    assert not np.allclose(a.rotations, content.rotations, atol=1e-3)
+
+
+def test_transfer_other_rate_and_rig(trained, model, bandai_dir, zeggs_dir):
+    data, _, _ = trained
+    style = bvh.load(_clips(data)[0])
+    for path in (bandai_dir / "dataset-1_bow_active_001.bvh", zeggs_dir / "067_Speech_2_x_1_0.bvh"):
+        content = bvh.load(path)
+        content = datasets.slice_motion(content, 0, min(200, content.num_frames))
+        out = model.transfer(content, style, method="soft")
+        assert out.num_frames == content.num_frames and out.fps == content.fps
+        assert out.skeleton.names == content.skeleton.names
+
+
+def test_too_short_and_nan_clips_rejected(trained, model):
+    data, _, _ = trained
+    content = bvh.load(_clips(data)[0])
+    short = datasets.slice_motion(content, 0, 10)
+    with pytest.raises(DataError, match="too short"):
+        model.transfer(short, content)
+    bad = content.replace(rotations=np.where(np.arange(content.num_frames)[:, None, None] == 3, np.nan,
+                                             content.rotations))
+    with pytest.raises(DataError, match="NaN"):
+        model.transfer(content, bad)
+    with pytest.raises(DataError, match="unknown transfer method"):
+        model.transfer(content, content, method="fancy")
+
+
+def test_resample_body_round_trip():
+    from jaxgest.tgst.api import resample_body
+
+    rng = np.random.default_rng(0)
+    x = np.cumsum(rng.normal(scale=0.01, size=(61, 39)), axis=0)
+    same = resample_body(x, 60.0, 60.0, 61)
+    np.testing.assert_allclose(same, x, atol=1e-6)
+    half = resample_body(x, 60.0, 30.0, 31)
+    np.testing.assert_allclose(half, x[::2], atol=1e-6)
+
+
+def test_cli_transfer_and_evaluate(trained, tmp_path, capsys):
+    data, work, _ = trained
+    c, s = _clips(data)[:2]
+    out = tmp_path / "o.bvh"
+    assert cli.main(["tgst", "transfer", "--workdir", str(work), "--content", str(c), "--style", str(s),
+                     "--out", str(out), "--method", "adain"]) == 0
+    m = bvh.load(out)
+    assert m.num_frames == bvh.load(c).num_frames
+    report = tmp_path / "r.json"
+    assert cli.main(["tgst", "evaluate", "--workdir", str(work), "--data", str(data), "--json", str(report),
+                     "--pairs", "all", "--max-pairs", "2", "--methods", "soft,adain"]) == 0
+    r = json.loads(report.read_text())
+    assert r["num_pairs"] == 2 and set(r["methods"]) == {"soft", "adain"}
+    assert r["methods"]["soft"]["num_evaluated"] + r["methods"]["soft"]["num_skipped"] == 2
+    capsys.readouterr()
+
+
+def test_cli_errors_are_one_line(trained, tmp_path, capsys):
+    data, work, _ = trained
+    c = str(_clips(data)[0])
+    cases = [
+        ["tgst", "transfer", "--workdir", str(tmp_path / "none"), "--content", c, "--style", c, "--out",
+         str(tmp_path / "o.bvh")],
+        ["tgst", "transfer", "--workdir", str(work), "--content", c, "--style", c, "--out",
+         str(tmp_path / "missing" / "o.bvh")],
+        ["tgst", "transfer", "--workdir", str(work), "--content", str(tmp_path / "nope.bvh"), "--style", c,
+         "--out", str(tmp_path / "o.bvh")],
+    ]
+    for argv in cases:
+        assert cli.main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("jaxgest: ") and "\n" not in err and "Traceback" not in err
+    assert not (tmp_path / "o.bvh").exists()

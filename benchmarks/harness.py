@@ -361,6 +361,11 @@ def machine_info() -> dict:
         "backend": jax.default_backend(),
         "devices": jax.device_count(),
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        # Thread settings of the NumPy BLAS; load average: other processes on the machine make every
+        # number noisier (a 1-minute load above the core count means the timings are shared).
+        "thread_env": {k: os.environ[k] for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+                       if k in os.environ},
+        "load_avg_1m": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
         "persistent_compilation_cache": bool(jax.config.jax_enable_compilation_cache
                                              and jax.config.jax_compilation_cache_dir),
     }

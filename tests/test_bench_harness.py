@@ -1,4 +1,4 @@
-"""The benchmark harness itself: equality check, a known-duration case, the JSON schema, the CLI."""
+"""The benchmark harness itself: equality check, a known-duration case, the JSON schema, reports, the CLI."""
 
 from __future__ import annotations
 
@@ -14,8 +14,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from benchmarks import __main__ as bench_main
 from benchmarks import harness, report
+from benchmarks.cases import case_modules, toy
+
 REPO = pathlib.Path(__file__).resolve().parents[1]
+QUIET = dict(log=lambda s: None)
 
 
 def _case(impls, **kw):
@@ -23,42 +27,166 @@ def _case(impls, **kw):
     return harness.Case(name="toy", batch=1, frames=64, impls=impls, make_args=lambda: (x,), **kw)
 
 
-def test_equality_check_catches_a_wrong_implementation():
+def _record(**kw):
+    rec = dict(case="c", impl="jit", batch=1, frames=320, per_pose_us=1.5, compile_s=0.5, repeats=3,
+               min_us=400.0, median_us=480.0, trace_s=0.01, lower_s=0.02, poses=320, group="g",
+               peak_mem_mb=None)
+    rec.update(kw)
+    return rec
+
+
+def test_equality_check_catches_a_wrong_implementation_before_timing():
+    calls = {"numpy": 0}
+
+    def counted(x):
+        calls["numpy"] += 1
+        return np.sin(x) * 2.0
+
     good = harness.Impl("jit", lambda x: jnp.sin(x) * 2.0, kind="jit")
-    numpy_ok = harness.Impl("numpy", lambda x: np.sin(x) * 2.0)
     wrong = harness.Impl("wrong", lambda x: np.sin(x) * 2.0 + 1e-2)
-    recs = harness.run_case(_case([good, numpy_ok]), repeats=2, log=lambda s: None)
+    with pytest.raises(harness.EqualityError, match=r"^wrong: output differs from jit's"):
+        harness.run_case(_case([good, harness.Impl("numpy", counted), wrong]), repeats=2, **QUIET)
+    assert calls["numpy"] == 1  # run once for the check, never timed
+    recs = harness.run_case(_case([good, harness.Impl("numpy", counted)]), repeats=2, **QUIET)
     assert [r["impl"] for r in recs] == ["jit", "numpy"]
-    with pytest.raises(harness.EqualityError, match="wrong: output differs"):
-        harness.run_case(_case([good, wrong]), repeats=2, log=lambda s: None)
-    with pytest.raises(harness.EqualityError, match="shape"):
+    assert recs[1]["max_abs_diff"] < 1e-6 and calls["numpy"] > 3
+
+
+def test_check_equal_names_shape_structure_and_non_finite_problems():
+    with pytest.raises(harness.EqualityError, match=r"^b: output shape \(4,\)"):
         harness.check_equal({"a": np.zeros(3), "b": np.zeros(4)}, rtol=0, atol=0)
+    with pytest.raises(harness.EqualityError, match="^b: output structure"):
+        harness.check_equal({"a": (np.zeros(3),), "b": (np.zeros(3), np.zeros(3))}, rtol=0, atol=0)
+    with pytest.raises(harness.EqualityError, match=r"^a: output\['y'\] is not finite"):
+        harness.check_equal({"a": {"y": np.array([np.nan])}, "b": {"y": np.array([np.nan])}}, rtol=0, atol=0)
+    with pytest.raises(harness.EqualityError, match=r"^b: output\[1\] differs .* 1 of 3 values"):
+        harness.check_equal({"a": (np.zeros(3), np.ones(3)), "b": (np.zeros(3), np.array([1.0, 1.0, 1.1]))},
+                            rtol=1e-3, atol=1e-3)
+    diffs = harness.check_equal({"a": np.ones(3), "b": np.ones(3) + 1e-7}, rtol=1e-5, atol=1e-5)
+    assert diffs["a"] == 0.0 and 0 < diffs["b"] < 1e-6
 
 
 def test_known_sleep_is_measured_within_tolerance():
     sleeper = harness.Impl("sleep", lambda x: time.sleep(0.02) or x)
-    (rec,) = harness.run_case(_case([sleeper]), repeats=3, log=lambda s: None)
-    assert 19_000 <= rec["median_us"] <= 60_000
-    assert rec["min_us"] <= rec["median_us"]
-    assert rec["compile_s"] is None and rec["repeats"] == 3
+    (rec,) = harness.run_case(_case([sleeper]), repeats=3, **QUIET)
+    assert 15_000 <= rec["median_us"] <= 60_000
+    assert rec["min_us"] <= rec["median_us"] and rec["inner"] == 1
+    assert rec["compile_s"] is None and rec["trace_s"] is None and rec["repeats"] == 3
     harness.validate_record(rec)
 
 
-def test_jit_records_have_separate_trace_lower_compile_and_valid_schema():
+def test_time_budget_caps_repeats_but_keeps_two():
+    times, inner = harness.time_steady(lambda: time.sleep(0.01), repeats=50, warmup=1, budget_s=0.05)
+    assert 2 <= len(times) <= 3 and inner >= 2
+
+
+def test_jit_records_time_trace_lower_compile_apart():
     impl = harness.Impl("jit", lambda x: jnp.cumsum(jnp.tanh(x)), kind="jit")
-    (rec,) = harness.run_case(_case([impl]), repeats=2, log=lambda s: None)
+    (rec,) = harness.run_case(_case([impl]), repeats=2, **QUIET)
     for k in ("trace_s", "lower_s", "compile_s"):
-        assert isinstance(rec[k], float) and rec[k] >= 0
+        assert isinstance(rec[k], float) and rec[k] > 0
+    assert rec["poses"] == 64 and rec["per_pose_us"] == pytest.approx(rec["median_us"] / 64)
     harness.validate_record(rec)
-    bad = dict(rec)
-    del bad["median_us"]
-    with pytest.raises(ValueError, match="median_us"):
-        harness.validate_record(bad)
-    bad = dict(rec, batch="1")
-    with pytest.raises(ValueError, match="batch"):
-        harness.validate_record(bad)
-    table = report.markdown_table([rec])
-    assert "| toy | jit | 1 | 64 |" in table
+
+
+def test_record_schema_is_validated():
+    harness.validate_record(_record())
+    harness.validate_record(_record(compile_s=None))
+    for bad, msg in [
+        ({"median_us": None}, "median_us"),
+        ({"batch": "1"}, "batch"),
+        ({"repeats": True}, "repeats"),
+        ({"frames": 320.0}, "frames"),
+        ({"min_us": 500.0}, "inconsistent"),
+        ({"trace_s": "0.1"}, "trace_s"),
+    ]:
+        with pytest.raises(ValueError, match=msg):
+            harness.validate_record(_record(**bad))
+    missing = _record()
+    del missing["per_pose_us"]
+    with pytest.raises(ValueError, match="misses 'per_pose_us'"):
+        harness.validate_record(missing)
+    doc = {"machine": harness.machine_info(), "quick": True, "wall_s": 1.0, "records": [_record()],
+           "ratios": {}, "failures": []}
+    harness.validate_document(json.loads(json.dumps(doc)))
+    with pytest.raises(ValueError, match="records"):
+        harness.validate_document({k: v for k, v in doc.items() if k != "records"})
+
+
+def test_reports_table_ratios_and_plot(tmp_path):
+    recs = [_record(case=f"s{n}", impl=i, frames=n, poses=n, min_us=m, median_us=m, per_pose_us=m / n,
+                    compile_s=0.5 if i == "jit" else None)
+            for n in (320, 640) for i, m in (("jit", 100.0), ("eager", 400.0), ("numpy", 1000.0))]
+    table = report.markdown_table(recs)
+    assert "| s320 | eager | 1 | 320 | 1.25 | 400.0 | 400.0 |  | 3 | 4.00x |" in table
+    rt = report.ratio_table(recs)
+    assert rt.splitlines()[0].endswith("| eager/jit | numpy/jit |")
+    assert "| s640 | 1 | 640 | 0.1562 | 0.625 | 1.562 | 4.00x | 10.00x |" in rt
+    assert report.ratios(recs)["s320"] == {"eager": 4.0, "numpy": 10.0}
+    out = report.plot_scaling(recs, tmp_path / "scaling.png")
+    assert out is not None and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert report.plot_scaling([_record(group="")], tmp_path / "none.png") is None
+
+
+def test_case_selection_by_substring_and_glob():
+    cases = [harness.Case(n, 1, 1, [], lambda: ()) for n in ("toy_conv_b1", "toy_conv_b8", "tgst_transfer_b1")]
+    names = lambda pat: [c.name for c in bench_main.select(cases, pat)]  # noqa: E731
+    assert names("b1") == ["toy_conv_b1", "tgst_transfer_b1"]
+    assert names("toy*,tgst_transfer") == [c.name for c in cases]
+    assert names("toy_conv_b?") == ["toy_conv_b1", "toy_conv_b8"] and names("nope") == []
+
+
+def test_toy_numpy_matches_jax_and_registry_finds_it():
+    params = toy.init_params(3)
+    x = np.random.default_rng(0).normal(size=(2, 37, 39)).astype(np.float32)
+    ref = toy.conv_stack_numpy(params, x)
+    assert ref.shape == (2, 10, 16)  # ceil(37 / 4) frames after two stride-2 convs
+    np.testing.assert_allclose(np.asarray(jax.jit(toy.conv_stack)(params, x)), ref, rtol=1e-4, atol=1e-4)
+    assert "benchmarks.cases.toy" in case_modules()
+    quick = [c.name for c in toy.cases(quick=True)]
+    assert {"toy_conv_b1", "toy_conv_b8", "toy_conv_scaling_320", "toy_conv_scaling_20480"} <= set(quick)
+
+
+def test_bench_options_match_python_m_benchmarks():
+    import argparse
+
+    from jaxgest.commands import bench
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    bench.register(sub)
+    (p,) = sub.choices.values()
+
+    def opts(parser):
+        return sorted((a.dest, tuple(a.option_strings), a.default) for a in parser._actions if a.dest != "help")
+
+    assert opts(p) == opts(bench_main.build_parser())
+    assert bench.find_benchmarks() is bench_main
+
+
+def test_jaxgest_bench_help():
+    r = subprocess.run([sys.executable, "-m", "jaxgest.cli", "bench", "--help"], cwd=REPO,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "--quick" in r.stdout and "--json" in r.stdout and "--cases" in r.stdout
+
+
+def test_python_m_benchmarks_writes_valid_json_and_table(tmp_path):
+    out = tmp_path / "bench.json"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    r = subprocess.run([sys.executable, "-m", "benchmarks", "--quick", "--cases", "toy_conv_b1", "--repeats", "2",
+                        "--json", str(out)], cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(out.read_text())
+    harness.validate_document(doc)
+    assert [(x["case"], x["impl"]) for x in doc["records"]] == [("toy_conv_b1", i) for i in ("jit", "eager", "numpy")]
+    assert doc["machine"]["cores"] >= 1 and doc["quick"] is True and doc["failures"] == []
+    assert set(doc["ratios"]["toy_conv_b1"]) == {"eager", "numpy"}
+    assert "| toy_conv_b1 | jit | 1 | 1280 |" in r.stdout and "| eager/jit | numpy/jit |" in r.stdout
+
+
+def test_no_matching_case_is_a_one_line_error(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "jaxgest.cli", "bench", "--cases", "no_such_case"], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.strip() == "jaxgest: no benchmark case matches 'no_such_case'"
 
 
 def test_numpy_reference_matches_the_jax_transfer():
@@ -77,18 +205,3 @@ def test_numpy_reference_matches_the_jax_transfer():
         nu, nl = numpy_tgst.transfer(params, c, s, hard=method == "hard")
         np.testing.assert_allclose(np.asarray(up), nu, atol=2e-4)
         np.testing.assert_allclose(np.asarray(lo), nl, atol=2e-4)
-
-
-@pytest.mark.slow
-def test_suite_cli_writes_valid_json(tmp_path):
-    out = tmp_path / "bench.json"
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    r = subprocess.run([sys.executable, "-m", "jaxgest.cli", "bench", "--quick", "--cases",
-                        "tgst_stage_decode", "--repeats", "2", "--json", str(out)],
-                       cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stderr[-2000:]
-    data = json.loads(out.read_text())
-    assert data["records"] and data["machine"]["cores"] >= 1
-    for rec in data["records"]:
-        harness.validate_record(rec)
-    assert "| tgst_stage_decode_both | jit |" in r.stdout

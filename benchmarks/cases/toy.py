@@ -43,7 +43,7 @@ def conv_stack(params, x: jax.Array) -> jax.Array:
     h = x
     for i, ((w, b), k, s) in enumerate(zip(params, KERNELS, STRIDES)):
         h = jax.lax.conv_general_dilated(h, w, window_strides=(s,), padding=[(k // 2, k // 2)],
-                                         dimension_numbers=("NWC", "WIO", "NWC")) + b
+                                         dimension_numbers=("NWC", "WIO", "NWC")) + b[None, None, :]
         if i < len(params) - 1:
             h = jax.nn.leaky_relu(h, SLOPE)
     return h

@@ -73,6 +73,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
     info = parallel.device_info(mesh)
     meta_config = {"preset": preset, **cfg.to_dict()}
     ckpt = Checkpointer(workdir, kind=KIND, config=meta_config, skeleton=skeleton.signature(), subdir=CKPT_SUBDIR)
+    if ckpt.latest_step() is not None:  # refuse a mismatching workdir before touching any of its files
+        ckpt.check_meta(ckpt.stored_meta())
     if jax.process_index() == 0:
         if not resume:
             data.pose_stats.save(stats_paths[0])

@@ -1,0 +1,41 @@
+"""CI check of `jaxgest demo` outputs: every GIF has more than one frame, every BVH loads in an independent
+parser (tests/test_bvh.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK, and
+metrics.json holds finite numbers."""
+
+import json
+import math
+import pathlib
+import sys
+
+import numpy as np
+from PIL import Image
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+from test_bvh import reference_fk  # noqa: E402
+
+from jaxgest.motion import bvh, kinematics  # noqa: E402
+
+out = pathlib.Path(sys.argv[1])
+gifs, files = sorted(out.glob("results/*.gif")), sorted(out.glob("results/*.bvh"))
+assert len(gifs) >= 4 and len(files) >= 12, (gifs, files)
+for g in gifs:
+    with Image.open(g) as im:
+        assert im.n_frames > 1, f"{g}: {im.n_frames} frame"
+for f in files:
+    ref, names, _ = reference_fk(f)
+    mine = kinematics.forward_kinematics(bvh.load(f))
+    assert np.abs(ref - mine).max() < 1e-3, f
+report = json.loads((out / "metrics.json").read_text())
+
+
+def finite(x):
+    if isinstance(x, dict):
+        return all(finite(v) for v in x.values())
+    if isinstance(x, list):
+        return all(finite(v) for v in x)
+    return not isinstance(x, float) or math.isfinite(x)
+
+
+assert finite(report["style_transfer"]) and finite(report["timings_s"])
+print(f"demo outputs ok: {len(gifs)} GIFs, {len(files)} BVH files (independent parser), metrics.json "
+      f"({report['timings_s']['total_s']:.0f} s)")

@@ -10,7 +10,10 @@ Every model (TGST autoencoder, TGST transformer, ZEGGS) trains through :func:`tr
   one-line :class:`~jaxgest.errors.CheckpointError` that names the differing fields;
 * ``workdir/metrics.jsonl`` gets one JSON line per log step and ``workdir/config.json`` the config;
 * a non-finite loss stops training with :class:`~jaxgest.errors.TrainingError`, keeping the last good
-  checkpoint (nothing is saved after the bad step).
+  checkpoint (nothing is saved after the bad step). Metrics are checked at every log or checkpoint step,
+  and the parameters before every save (a NaN gradient with a still-finite loss is caught there), e.g.
+  ``tgst autoencoder: non-finite loss at step 120; stopped, the last good checkpoint (step 100) is kept
+  (lower the learning rate or check the data for NaN)``.
 
 References: STYLE.md (big_vision train loop, flax examples' orbax usage).
 """
@@ -233,13 +236,34 @@ class MetricsLogger:
         return record
 
 
-def _check_finite(step: int, metrics: Mapping[str, float], stage: str) -> None:
+def _kept(checkpointer: Optional["Checkpointer"]) -> str:
+    last = checkpointer.latest_step() if checkpointer is not None else None
+    return "no checkpoint was written" if last is None else f"the last good checkpoint (step {last}) is kept"
+
+
+_HINT = "(lower the learning rate or check the data for NaN)"
+
+
+def _check_finite(step: int, metrics: Mapping[str, float], stage: str, checkpointer=None) -> None:
     bad = [k for k, v in metrics.items() if isinstance(v, float) and not math.isfinite(v)]
     if bad:
-        raise TrainingError(
-            f"{stage}: non-finite {', '.join(sorted(bad))} at step {step}; stopped, the last good "
-            "checkpoint is kept (lower the learning rate or check the data for NaN)"
-        )
+        raise TrainingError(f"{stage}: non-finite {', '.join(sorted(bad))} at step {step}; stopped, "
+                            f"{_kept(checkpointer)} {_HINT}")
+
+
+@jax.jit
+def _all_finite(tree) -> jax.Array:
+    leaves = [jax.numpy.all(jax.numpy.isfinite(x)) for x in jax.tree_util.tree_leaves(tree)
+              if jax.numpy.issubdtype(x.dtype, jax.numpy.inexact)]
+    return jax.numpy.all(jax.numpy.stack(leaves)) if leaves else jax.numpy.bool_(True)
+
+
+def _check_params(step: int, params, stage: str, checkpointer) -> None:
+    """Before a save: the loss of a step is computed before its update, so a NaN/inf gradient with a finite
+    loss would otherwise be checkpointed."""
+    if not bool(jax.device_get(_all_finite(params))):
+        raise TrainingError(f"{stage}: non-finite parameters at step {step} (NaN/inf gradient); stopped, "
+                            f"{_kept(checkpointer)} {_HINT}")
 
 
 def train_loop(
@@ -279,7 +303,7 @@ def train_loop(
         at_ckpt = checkpointer is not None and (step % ckpt_every == 0 or step == num_steps)
         if at_log or at_ckpt:
             host = {k: float(np.asarray(jax.device_get(v))) for k, v in metrics.items()}
-            _check_finite(step, host, desc)
+            _check_finite(step, host, desc, checkpointer)
             if at_log:
                 now = time.perf_counter()
                 host["steps_per_s"] = log_every / max(now - last_log_time, 1e-9) if step > start + 1 else 0.0
@@ -290,6 +314,7 @@ def train_loop(
                     on_log(step, host)
                 bar.set_postfix({k: f"{v:.4g}" for k, v in host.items() if k == "loss"})
             if at_ckpt:
+                _check_params(step, state.params, desc, checkpointer)
                 checkpointer.save(state)
         bar.update(1)
     bar.close()

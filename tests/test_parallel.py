@@ -4,8 +4,11 @@ The multi-device runs happen in subprocesses (tests/_parallel_worker.py) whose `
 CPU devices before jax is imported: one run on 1 device, one on 4 devices, and one on 2 processes x 2
 devices joined by ``jax.distributed`` (``JAX_COORDINATOR_ADDRESS`` on localhost), each host reading only
 its block of the batch. All start at once and are shared by the tests of this module (marked slow: the
-subprocesses take ~20 s of compile time together on 2 cores). Every model in the
-worker's registry is checked; the in-process tests cover the single-device API and its errors.
+subprocesses take ~1-2 min of compile time together on 2 cores). Every model in the worker's registry is
+checked: two toys and the real ones (TGST autoencoder, TGST transformer, ZeroEGGS, tiny presets on the
+synthetic data); the 4-device run also calls the ``train`` entry points of both papers to check that
+config.json and metrics.jsonl record the device count. The in-process tests cover the single-device API
+and its errors.
 """
 
 from __future__ import annotations
@@ -45,7 +48,8 @@ def _free_port() -> int:
 
 
 def _env(host_devices: int, **extra) -> dict:
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
+    keep = ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS")  # a shared XLA cache
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_")) or k in keep}
     env.update(XLA_FLAGS=f"--xla_force_host_platform_device_count={host_devices}", JAX_PLATFORMS="cpu",
                PYTHONPATH=str(WORKER.parents[1]), **extra)
     return env
@@ -59,7 +63,7 @@ def runs(tmp_path_factory):
     port = _free_port()
     jobs = {
         "one": (common + ["--devices", "1", "--out", str(root / "one")], _env(4)),
-        "four": (common + ["--devices", "4", "--out", str(root / "four")], _env(4)),
+        "four": (common + ["--devices", "4", "--real-train", "--out", str(root / "four")], _env(4)),
     }
     for p in range(2):
         jobs[f"host{p}"] = (
@@ -72,7 +76,7 @@ def runs(tmp_path_factory):
     failed = []
     for k, proc in procs.items():
         try:
-            _, err = proc.communicate(timeout=300)
+            _, err = proc.communicate(timeout=1200)  # generous: 2 shared cores, cold compilation
         except subprocess.TimeoutExpired:
             proc.kill()
             _, err = proc.communicate()
@@ -88,16 +92,46 @@ def _info(folder: pathlib.Path) -> dict:
     return json.loads((folder / "info.json").read_text())
 
 
-def _assert_same_params(a: pathlib.Path, b: pathlib.Path) -> None:
+#: Leaves whose gradient is identically zero in exact arithmetic, per model: the key bias of the TGST
+#: decoder's cross-attention (every logit of a query moves by the same q.b, and the softmax is invariant to
+#: that shift). Its float gradient is pure rounding noise, which Adam normalises into steps of +-lr in a
+#: direction that depends on the summation order, i.e. on the number of devices. Its movement is bounded
+#: by lr * steps instead of compared. (The encoder's key bias has the same invariance but its rounding
+#: noise happens to be exactly zero; it is compared like every other leaf.)
+ZERO_GRADIENT_LEAVES = {"tgst_transformer": {"['decoder']['key']['bias']"}}
+#: Adam learning rate of each real model's tiny preset (bounds the step of a zero-gradient leaf).
+LEARNING_RATE = {"tgst_transformer": 1e-3}
+
+
+def _assert_same_params(a: pathlib.Path, b: pathlib.Path, model: str = "", init: pathlib.Path = None) -> None:
+    """Same parameters up to float reassociation of the cross-device sums.
+
+    Adam divides each gradient element by its own magnitude, so an element whose gradient is tiny compared
+    with the rounding error of the gradient sum can move differently (by up to lr per step); a handful of
+    such elements are allowed per leaf (<= 0.2 %), each within 5 % of the largest movement of its leaf.
+    """
     pa, pb = np.load(a), np.load(b)
     assert sorted(pa.files) == sorted(pb.files)
+    p0 = np.load(init) if init is not None else None
     for k in pa.files:
-        np.testing.assert_allclose(pb[k], pa[k], rtol=1e-5, atol=1e-6, err_msg=k)
+        if k in ZERO_GRADIENT_LEAVES.get(model, ()):
+            bound = LEARNING_RATE[model] * STEPS * 1.01
+            assert np.max(np.abs(pb[k] - pa[k])) <= 2 * bound, k
+            continue
+        close = np.isclose(pb[k], pa[k], rtol=1e-5, atol=1e-6)
+        if close.all():
+            continue
+        assert p0 is not None, f"{k}: {np.count_nonzero(~close)} elements differ"
+        moved = float(np.max(np.abs(pa[k] - p0[k])))
+        worst = float(np.max(np.abs(pb[k] - pa[k])))
+        assert np.count_nonzero(~close) <= max(1, 0.002 * close.size) and worst <= 0.05 * moved, (
+            f"{k}: {np.count_nonzero(~close)} of {close.size} elements differ, worst by {worst:.3g} "
+            f"(largest movement {moved:.3g})")
 
 
 @pytest.mark.slow
 def test_every_registered_model_is_run(runs):
-    assert MODELS and {"toy_mlp", "toy_conv1d"} <= set(MODELS)
+    assert MODELS and {"toy_mlp", "toy_conv1d", "tgst_ae", "tgst_transformer", "zeggs"} <= set(MODELS)
     for run in runs.values():
         assert sorted(_info(run)["models"]) == MODELS
 
@@ -105,7 +139,8 @@ def test_every_registered_model_is_run(runs):
 @pytest.mark.slow
 @pytest.mark.parametrize("model", MODELS)
 def test_four_devices_train_like_one(runs, model):
-    _assert_same_params(runs["one"] / f"{model}.npz", runs["four"] / f"{model}.npz")
+    _assert_same_params(runs["one"] / f"{model}.npz", runs["four"] / f"{model}.npz", model,
+                        runs["one"] / f"{model}_init.npz")
     one, four = _info(runs["one"])["models"][model], _info(runs["four"])["models"][model]
     # The loss is the mean over the GLOBAL batch on both: same numbers, not a per-device mean.
     np.testing.assert_allclose(four["losses"], one["losses"], rtol=1e-5)
@@ -163,7 +198,8 @@ def test_two_hosts_train_like_one_device(runs, model):
         assert (info["process_index"], info["device_count"], info["local_device_count"]) == (p, 4, 2)
         m = info["models"][model]
         assert m["device_info"] == {"devices": 4, "platform": "cpu", "processes": 2}
-        _assert_same_params(runs["one"] / f"{model}.npz", runs[f"host{p}"] / f"{model}.npz")
+        _assert_same_params(runs["one"] / f"{model}.npz", runs[f"host{p}"] / f"{model}.npz", model,
+                            runs["one"] / f"{model}_init.npz")
         # Host p holds only its contiguous block of the global batch.
         per = BATCH // 4
         assert m["batch_layout"]["shape"][0] == BATCH and m["batch_layout"]["num_shards"] == 2
@@ -171,6 +207,37 @@ def test_two_hosts_train_like_one_device(runs, model):
         assert m["batch_rows_match"] and m["global_and_host_local_paths_agree"]
         assert all(x["fully_replicated"] and x["num_devices"] == 4 for x in m["param_layouts"])
         assert "a 2-process run uses all 4 devices" in info["errors"]["partial_mesh"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["tgst", "zeggs"])
+def test_train_entry_points_record_the_device_count(runs, kind):
+    """``tgst.train.train`` / ``zeggs.train.train`` with devices=4: config.json and every metrics line say so."""
+    real = _info(runs["four"])["real_training"][kind]
+    assert {k: real["config"][k] for k in ("devices", "platform", "processes")} == {
+        "devices": 4, "platform": "cpu", "processes": 1}
+    stages = {"tgst": ["autoencoder", "autoencoder", "transformer", "transformer"], "zeggs": ["zeggs", "zeggs"]}
+    assert [r["stage"] for r in real["metrics"]] == stages[kind]
+    assert all(r["devices"] == 4 and r["processes"] == 1 and np.isfinite(r["loss"]) for r in real["metrics"])
+
+
+def _python_names(path: pathlib.Path) -> list:
+    """Identifiers used in a Python file's code (strings and comments excluded)."""
+    import tokenize
+
+    with open(path, "rb") as f:
+        return [t.string for t in tokenize.tokenize(f.readline) if t.type == tokenize.NAME]
+
+
+def test_no_pmap_anywhere():
+    """Data parallelism is jit + shardings only: no ``pmap`` (nor ``xmap``) in the package, benchmarks or tests."""
+    root = WORKER.parents[1]
+    files = [p for d in ("jaxgest", "benchmarks", "tests") for p in sorted((root / d).rglob("*.py"))]
+    assert len(files) > 20
+    used = [f"{p.relative_to(root)}: {n}" for p in files for n in _python_names(p) if n in ("pmap", "xmap")]
+    assert not used, used
+    # the check itself sees identifiers: parallel.py's step builder is found
+    assert "jit" in _python_names(root / "jaxgest" / "parallel.py")
 
 
 # ----- in-process (one CPU device) ------------------------------------------------------------------------

@@ -19,8 +19,9 @@ lasts at least ``min_repeat_s`` (20 ms) and the per-call time is recorded; every
 for with ``jax.block_until_ready`` before the next call starts, so the number is the latency of one call,
 not the throughput of overlapping asynchronous dispatches. Implementations slower than the per-impl
 budget get fewer repeats (never fewer than 2); ``repeats`` in the record is what was actually run.
-Reported: ``min_us`` and ``median_us`` per call and ``per_pose_us = median_us / poses`` (poses = batch x
-frames unless the case says otherwise).
+Reported: ``min_us`` and ``median_us`` per call, ``per_pose_us = median_us / poses`` (poses = batch x
+frames unless the case says otherwise) and ``per_frame_us = median_us / frames`` (the cost of one frame of
+the whole batch: the per-step latency of an autoregressive generator).
 
 Peak memory (Linux): before each implementation is timed the kernel's resident-set high-water mark is
 reset (``/proc/self/clear_refs`` <- "5"). ``peak_rss_mb`` is ``VmHWM`` afterwards -- the peak RSS of the
@@ -59,6 +60,7 @@ EXTRA_FIELDS: dict[str, tuple] = {
     "lower_s": (float, type(None)),
     "inner": (int,),
     "poses": (int,),
+    "per_frame_us": (float,),
     "peak_rss_mb": (float, type(None)),
     "peak_mem_mb": (float, type(None)),
     "max_abs_diff": (float, type(None)),
@@ -289,6 +291,7 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
         }
         rec.update(measure(impl, args, repeats=repeats, budget_s=budget_s, slow_repeats=case.max_repeats_slow))
         rec["per_pose_us"] = rec["median_us"] / case.num_poses
+        rec["per_frame_us"] = rec["median_us"] / case.frames
         log(f"  {case.name:<28} {impl.name:<6} {rec['median_us'] / 1e3:10.3f} ms/call "
             f"{rec['per_pose_us']:10.4f} us/pose  compile {rec['compile_s'] or 0:5.2f} s  x{rec['repeats']}")
         records.append(rec)

@@ -86,6 +86,7 @@ def test_jit_records_time_trace_lower_compile_apart():
     for k in ("trace_s", "lower_s", "compile_s"):
         assert isinstance(rec[k], float) and rec[k] > 0
     assert rec["poses"] == 64 and rec["per_pose_us"] == pytest.approx(rec["median_us"] / 64)
+    assert rec["per_frame_us"] == pytest.approx(rec["median_us"] / 64)  # batch 1: per frame = per pose
     harness.validate_record(rec)
 
 
@@ -205,3 +206,64 @@ def test_numpy_reference_matches_the_jax_transfer():
         nu, nl = numpy_tgst.transfer(params, c, s, hard=method == "hard")
         np.testing.assert_allclose(np.asarray(up), nu, atol=2e-4)
         np.testing.assert_allclose(np.asarray(lo), nl, atol=2e-4)
+
+
+@pytest.fixture(scope="module")
+def zeggs_tiny():
+    from benchmarks.cases import zeggs as Z
+    from jaxgest.zeggs.config import get_config
+
+    cfg = get_config("tiny")
+    params = Z.random_params(cfg, seed=1)
+    inputs = Z.generator_inputs(cfg, 2, 12, seed=1)
+    out = jax.jit(Z._generate_fn(cfg))(params, *inputs)
+    return cfg, params, inputs, jax.device_get(out)
+
+
+def test_zeggs_random_params_have_the_init_shapes(zeggs_tiny):
+    from jaxgest.zeggs.steps import init_params
+
+    cfg, params, _, _ = zeggs_tiny
+    shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
+    assert jax.tree_util.tree_structure(params) == jax.tree_util.tree_structure(shapes)
+    assert all(a.shape == b.shape and a.dtype == b.dtype
+               for a, b in zip(jax.tree_util.tree_leaves(params), jax.tree_util.tree_leaves(shapes)))
+    assert np.all(np.asarray(params["style_encoder"]["conv0_norm"]["scale"]) == 1.0)
+    k = np.asarray(params["generator"]["decoder"]["gru0"]["hidden"]["kernel"])
+    assert 0.5 < k.std() * np.sqrt(k.shape[0]) < 1.5  # LeCun-normal scale
+
+
+def test_numpy_zeggs_generator_and_variants_match_the_model(zeggs_tiny):
+    from benchmarks.cases import zeggs as Z
+    from benchmarks.cases import zeggs_variants as V
+
+    cfg, params, inputs, ref = zeggs_tiny
+    assert ref["pose"].shape == (2, 13, cfg.pose_dim) and np.all(np.isfinite(ref["pose"]))
+    got = Z._numpy_generate(cfg)(params, *inputs)
+    for k in ref:
+        np.testing.assert_allclose(got[k], ref[k], rtol=1e-4, atol=1e-4, err_msg=k)
+    for name, kw in V.VARIANTS.items():
+        out = jax.jit(V.make_variant(cfg, **kw))(params, *inputs)
+        for k in ref:
+            np.testing.assert_allclose(np.asarray(out[k]), ref[k], rtol=1e-4, atol=1e-4,
+                                       err_msg=f"{name} {k}")
+    # bf16 kernels differ from float32, but not by much on a short sequence
+    out = jax.jit(V.make_variant(cfg, hoist=True, fused=True, weight_dtype=jnp.bfloat16))(params, *inputs)
+    err = np.max(np.abs(np.asarray(out["pose"]) - ref["pose"]))
+    assert 0 < err < 0.1
+
+
+def test_model_cases_are_registered_with_quick_and_full_presets():
+    from benchmarks.cases import all_cases
+
+    def names(quick):
+        return {c.name for c in all_cases(quick, log=lambda s: None) if c.quick or not quick}
+
+    quick, full = names(True), names(False)
+    for m in ("zeggs", "zeggs_variants", "training", "tgst"):
+        assert f"benchmarks.cases.{m}" in case_modules()
+    assert {"zeggs_generate_check_b1", "zeggs_generate_b1", "zeggs_generate_b32", "zeggs_style_encoder_b1",
+            "zeggs_speech_features", "train_tgst_autoencoder", "train_tgst_transformer",
+            "train_zeggs_tiny"} <= quick
+    assert "train_zeggs_paper" in full and "train_zeggs_paper" not in quick and "train_zeggs_tiny" not in full
+    assert not any(n.startswith("zeggs_variant") for n in quick) and "zeggs_variants_b1" in full

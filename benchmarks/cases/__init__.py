@@ -22,7 +22,9 @@ A module whose import fails because a ``jaxgest`` model module does not exist ye
 skipped with a note; any other import error is a bug and propagates.
 
 ``toy`` is the harness demonstration (an inline conv stack, not a model); the model cases live in
-``tgst`` (transfer, clip-length scaling, stages), ``zeggs`` and training-step modules.
+``tgst`` (transfer, clip-length scaling, stages), ``zeggs`` (generation per frame, style encoder, speech
+encoder and features), ``training`` (one optimiser step per model) and ``zeggs_variants`` (benchmark-local
+generator optimisation experiments, full run only).
 """
 
 from __future__ import annotations

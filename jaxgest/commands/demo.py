@@ -27,8 +27,8 @@ from jaxgest.errors import DataError
 
 #: (synthetic clips, seconds, TGST AE steps, TGST transformer steps, ZEGGS steps, GIF seconds)
 PLANS = {
-    "quick": dict(clips=14, seconds=6.0, ae_steps=150, transformer_steps=80, zeggs_steps=80, gif_seconds=4.0),
-    "full": dict(clips=42, seconds=10.0, ae_steps=1500, transformer_steps=600, zeggs_steps=800, gif_seconds=6.0),
+    "quick": dict(clips=14, seconds=6.0, ae_steps=400, transformer_steps=200, zeggs_steps=200, gif_seconds=4.0),
+    "full": dict(clips=42, seconds=10.0, ae_steps=6000, transformer_steps=4000, zeggs_steps=4000, gif_seconds=6.0),
 }
 CONTENT, OTHER_CONTENT = "greeting", "directions"  # first two contents of the plan (content-major)
 NEUTRAL, STYLES = "neutral", ("energetic", "sad")

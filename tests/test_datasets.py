@@ -125,3 +125,15 @@ def test_resample_motion(motion, fps):
         assert np.max(quat_angle(quat_mul(quat_inv(src), dst))) < 1e-6
     back = ds.resample_motion(ds.resample_motion(motion, 120.0), 60.0)
     np.testing.assert_allclose(back.translations, motion.translations, atol=1e-9)
+
+
+def test_dataset_repository_root_uses_its_data_folder(bandai_dir, tmp_path):
+    root = tmp_path / "bandai-namco-1"
+    (root / "data").mkdir(parents=True)
+    (root / "README.md").write_text("the dataset repository's own files\n")
+    for p in sorted(bandai_dir.glob("dataset-1_bow_*.bvh"))[:2]:
+        (root / "data" / p.name).symlink_to(p)
+    clips = ds.load_folder(root)
+    assert len(clips) == 2 and clips[0].content == "bow"
+    with pytest.raises(DataError, match="no .bvh files"):
+        ds.load_folder(tmp_path / "bandai-namco-1" / "..")  # a folder with neither clips nor data/

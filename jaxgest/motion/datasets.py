@@ -54,6 +54,18 @@ class Clip:
     audio_start: float = 0.0
 
 
+def dataset_root(folder) -> pathlib.Path:
+    """The folder holding the clips: ``folder`` itself, or its ``data/`` subfolder when ``folder`` has no BVH
+    and no manifest.csv (the Bandai-Namco repository keeps its BVH files in ``dataset-1/data/``)."""
+    folder = pathlib.Path(folder)
+    if not folder.is_dir():
+        raise DataError(f"{folder}: not a directory")
+    has_clips = (folder / "manifest.csv").is_file() or any(p.suffix.lower() == ".bvh" for p in folder.iterdir())
+    if not has_clips and (folder / "data").is_dir():
+        return folder / "data"
+    return folder
+
+
 def detect_layout(folder) -> str:
     """``"manifest"``, ``"bandai"`` or ``"zeggs"``; DataError for a missing/empty folder or unknown names."""
     folder = pathlib.Path(folder)
@@ -80,7 +92,7 @@ def load_folder(folder, progress: bool = False) -> list:
 
     from jaxgest.motion import bvh
 
-    folder = pathlib.Path(folder)
+    folder = dataset_root(folder)
     layout = detect_layout(folder)
     entries = {"manifest": _manifest_entries, "bandai": _bandai_entries, "zeggs": _zeggs_entries}[layout](folder)
     if not entries:

@@ -3,12 +3,18 @@
 Each command group lives beside its code and exposes ``register(subparsers)``; the registered parser
 sets ``func`` to a callable ``func(args) -> int | None``. Every :class:`jaxgest.errors.JaxgestError`
 becomes one line on stderr and exit status 2.
+
+Progress bars (tqdm, drawn on stderr) are shown only when stderr is a terminal: when it is a file or a
+pipe, the bars' carriage-return redraws are dropped, so a failed command's stderr is exactly its one-line
+``jaxgest: <message>`` (and a log holds no bar fragments). Other stderr output passes through unchanged.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import io
 import sys
 
 from jaxgest.errors import JaxgestError
@@ -41,8 +47,42 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class _ArgumentParserExit(Exception):
-    pass
+class _NoProgressBars(io.TextIOBase):
+    """A text stream forwarding everything but tqdm's progress-bar writes to ``stream``.
+
+    tqdm draws a bar as one write starting with ``"\r"`` and ends a kept bar with a lone ``"\n"``; both
+    are dropped (the newline only right after a dropped bar).
+    """
+
+    def __init__(self, stream):
+        super().__init__()
+        self._stream = stream
+        self._after_bar = False
+
+    def write(self, text: str) -> int:
+        if text.startswith("\r") or (self._after_bar and text == "\n"):
+            self._after_bar = text.startswith("\r")
+            return len(text)
+        self._after_bar = False
+        return self._stream.write(text)
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+    def isatty(self) -> bool:
+        return False
+
+    @property
+    def encoding(self):
+        return getattr(self._stream, "encoding", "utf-8")
+
+
+def _stderr_without_bars():
+    try:
+        terminal = sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        terminal = False
+    return contextlib.nullcontext() if terminal else contextlib.redirect_stderr(_NoProgressBars(sys.stderr))
 
 
 def main(argv=None) -> int:
@@ -52,7 +92,8 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     try:
-        rc = args.func(args)
+        with _stderr_without_bars():
+            rc = args.func(args)
     except JaxgestError as e:
         print(f"jaxgest: {e}", file=sys.stderr)
         return 2

@@ -104,7 +104,7 @@ class TGSTModel:
                             f"{self.min_frames(motion.fps)} frames ({self.cfg.min_frames} at {self.cfg.fps:g} fps)")
         try:
             return body.motion_to_body(m).upper.astype(np.float32)
-        except KeyError as e:
+        except (KeyError, DataError) as e:  # DataError: no joint map matches (its message names no file)
             raise DataError(f"{label}: {what} skeleton does not fit any joint map ({e})") from None
 
     def transfer_body(self, content_upper: np.ndarray, style_upper: np.ndarray, method: str = "soft"):
@@ -141,11 +141,14 @@ def load_model(workdir) -> TGSTModel:
         raise CheckpointError(f"{workdir}: not a TGST workdir (no config.json; run 'jaxgest tgst train' first)")
     try:
         stored = json.loads(cfg_path.read_text())
+        # ZeroEGGS workdirs name their model under "model"; check the kind before reading a TGST config
+        kind = stored.get("kind", stored.get("model", "tgst"))
+        if kind != "tgst":
+            raise CheckpointError(f"{workdir}: a {kind} workdir, not a TGST one (train one with 'jaxgest tgst "
+                                  "train')")
         cfg = config_from_dict(stored["config"])
-    except (ValueError, KeyError, TypeError) as e:
+    except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise CheckpointError(f"{cfg_path}: unreadable TGST config ({type(e).__name__}: {e})") from None
-    if stored.get("kind", "tgst") != "tgst":
-        raise CheckpointError(f"{workdir}: a {stored.get('kind')} workdir, not a TGST one")
     template = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))  # shapes only
     ae_ck = ae_checkpointer(workdir, cfg, read_only=True)
     ae = ae_ck.restore_params(template["autoencoder"])

@@ -65,7 +65,9 @@ def _transfer(args) -> int:
     for path in (args.content, args.style):
         if not pathlib.Path(path).is_file():
             raise DataError(f"{path}: no such file")
-    content, style = bvh.load(args.content), bvh.load(args.style)
+    # named by their paths so that errors about either clip name the file
+    content = bvh.load(args.content).replace(name=str(args.content))
+    style = bvh.load(args.style).replace(name=str(args.style))
     model = load_model(args.workdir)
     result = model.transfer(content, style, method=args.method, name=out.stem)
     bvh.save(result, out)

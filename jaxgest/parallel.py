@@ -176,8 +176,10 @@ def _check_divisible(batch, parts: int, what: str) -> None:
             raise JaxgestError(f"batch array {name} is a scalar; every batch array needs a leading batch "
                                "axis")
         if shape[0] % parts:
+            divisors = ", ".join(str(d) for d in range(1, shape[0] + 1) if shape[0] % d == 0)
             raise JaxgestError(f"batch array {name} has {shape[0]} examples, not divisible by the {parts} "
-                               f"{what}; choose a batch size that is a multiple of {parts}")
+                               f"{what}; use a device count that divides the global batch ({divisors}) or "
+                               f"a batch size that is a multiple of {parts}")
 
 
 def shard_batch(batch: Any, mesh: Mesh) -> Any:

@@ -27,6 +27,7 @@ import re
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 import jax
@@ -84,21 +85,23 @@ def temporary_folders(ckpt_dir: pathlib.Path) -> list:
 
 def kill_when(args, env, ready, timeout=600.0, poll=0.002):
     """Start the command, SIGKILL it as soon as ``ready()`` is true; returns the process (must be killed)."""
-    proc = subprocess.Popen(_cmd(*args), env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    t0 = time.monotonic()
-    try:
-        while not ready():
-            if proc.poll() is not None:
-                raise AssertionError(f"run ended before the kill (exit {proc.returncode}): "
-                                     f"{proc.stderr.read()[-2000:]}")
-            if time.monotonic() - t0 > timeout:
-                raise AssertionError("no checkpoint appeared in time")
-            time.sleep(poll)
-        proc.send_signal(signal.SIGKILL)
-    finally:
-        if proc.poll() is None and not ready():
-            proc.kill()
-        proc.communicate()
+    with tempfile.TemporaryFile("w+") as err:  # a file, not a pipe: a full pipe would block the run
+        proc = subprocess.Popen(_cmd(*args), env=env, stdout=subprocess.DEVNULL, stderr=err, text=True)
+        t0 = time.monotonic()
+        try:
+            while not ready():
+                if proc.poll() is not None:
+                    err.seek(0)
+                    raise AssertionError(f"run ended before the kill (exit {proc.returncode}): "
+                                         f"{err.read()[-2000:]}")
+                if time.monotonic() - t0 > timeout:
+                    raise AssertionError("no checkpoint appeared in time")
+                time.sleep(poll)
+            proc.send_signal(signal.SIGKILL)
+        finally:
+            if proc.poll() is None and not ready():
+                proc.kill()
+            proc.wait()
     assert proc.returncode == -signal.SIGKILL
     return proc
 

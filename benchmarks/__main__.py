@@ -82,10 +82,10 @@ def run(args) -> tuple[dict, int]:
     harness.validate_document(doc)
     print()
     print(report.markdown_table(records))
-    rt = report.ratio_table(records)
-    if rt:
-        print()
-        print(rt)
+    for extra in (report.ratio_table(records), report.compile_table(records)):
+        if extra:
+            print()
+            print(extra)
     if args.json:
         write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
         print(f"\nwrote {args.json}")

@@ -1,4 +1,4 @@
-"""Markdown tables (every record; eager/jit and numpy/jit side by side) and the scaling plot."""
+"""Markdown tables (every record; eager/jit and numpy/jit side by side; compile times) and the scaling plot."""
 
 from __future__ import annotations
 
@@ -60,6 +60,19 @@ def ratio_table(records: list[dict]) -> str:
         cells += [f"{rows[c][i]['per_pose_us']:.4g}" if i in rows[c] else "" for i in others]
         cells += [f"{rows[c][i]['median_us'] / jit:.2f}x" if i in rows[c] else "" for i in others]
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def compile_table(records: list[dict]) -> str:
+    """Jit records: trace, lower and compile seconds apart, and the steady-state per-frame latency."""
+    rows = [r for r in records if r.get("compile_s") is not None]
+    if not rows:
+        return ""
+    lines = ["| case | impl | trace s | lower s | compile s | per-frame µs |", "|---|---|---:|---:|---:|---:|"]
+    for r in rows:
+        cells = [f"{r[k]:.2f}" if r.get(k) is not None else "" for k in ("trace_s", "lower_s", "compile_s")]
+        per_frame = r.get("per_frame_us", r["median_us"] / r["frames"])
+        lines.append(f"| {r['case']} | {r['impl']} | " + " | ".join(cells) + f" | {per_frame:.4g} |")
     return "\n".join(lines)
 
 

@@ -124,6 +124,8 @@ def test_reports_table_ratios_and_plot(tmp_path):
     assert rt.splitlines()[0].endswith("| eager/jit | numpy/jit |")
     assert "| s640 | 1 | 640 | 0.1562 | 0.625 | 1.562 | 4.00x | 10.00x |" in rt
     assert report.ratios(recs)["s320"] == {"eager": 4.0, "numpy": 10.0}
+    ct = report.compile_table(recs).splitlines()
+    assert len(ct) == 4 and ct[2] == "| s320 | jit | 0.01 | 0.02 | 0.50 | 0.3125 |"  # jit records only
     out = report.plot_scaling(recs, tmp_path / "scaling.png")
     assert out is not None and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert report.plot_scaling([_record(group="")], tmp_path / "none.png") is None

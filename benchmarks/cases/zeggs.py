@@ -10,7 +10,7 @@ depend on the values). Inputs are random speech embeddings / pose features / a u
   eager JAX (``jax.disable_jit``: flax's scan runs as a Python loop of op-by-op calls) vs the NumPy
   reference (:mod:`benchmarks.numpy_zeggs`) -- the equality check of the generator.
 * ``zeggs_generate_b1`` / ``zeggs_generate_b32``: :meth:`ZeggsModel.generate` (hidden-state initializer +
-  one ``nn.scan`` over the frames) generating ``frames`` frames (300 = 5 s at 60 fps; 120 in ``--quick``)
+  one ``nn.scan`` over the frames) generating ``frames`` frames (300 = 5 s at 60 fps; 60 in ``--quick``)
   after warm-up, ``jit`` vs NumPy (NumPy in the full run only). ``per_pose_us`` is per generated frame
   and sequence; the per-frame latency of the batch is ``per_frame_us`` (= per pose x batch).
 * ``zeggs_style_encoder_b{1,32}``: posterior of a 512-frame style clip (the longest training window),
@@ -193,9 +193,9 @@ def speech_features_case(seconds: float = AUDIO_SECONDS) -> Case:
 
 
 def cases(quick: bool) -> list:
-    # --quick: the generator's per-frame cost at 120 frames (it does not depend on the length: one scan),
+    # --quick: the generator's per-frame cost at 60 frames (it does not depend on the length: one scan),
     # without the NumPy reference (seconds per call at batch 32); the full run: 300 frames, jit vs NumPy.
-    frames = 120 if quick else 300
+    frames = 60 if quick else 300
     return [
         generate_case(1, CHECK_FRAMES, name="zeggs_generate_check_b1", with_eager=True),
         generate_case(32, CHECK_FRAMES, name="zeggs_generate_check_b32", with_eager=True, quick=False),

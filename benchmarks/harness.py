@@ -21,7 +21,10 @@ not the throughput of overlapping asynchronous dispatches. Implementations slowe
 budget get fewer repeats (never fewer than 2); ``repeats`` in the record is what was actually run.
 Reported: ``min_us`` and ``median_us`` per call, ``per_pose_us = median_us / poses`` (poses = batch x
 frames unless the case says otherwise) and ``per_frame_us = median_us / frames`` (the cost of one frame of
-the whole batch: the per-step latency of an autoregressive generator).
+the whole batch: the per-step latency of an autoregressive generator). ``cpu_median_us`` is the median
+process CPU time per call (all threads): on a loaded machine the wall-clock numbers stretch with the
+load while the CPU time of single-threaded work barely moves, so comparing the two tells a slow
+implementation from a busy machine (CPU / wall ~ 2 on an idle 2-core machine running both cores).
 
 Peak memory (Linux): before each implementation is timed the kernel's resident-set high-water mark is
 reset (``/proc/self/clear_refs`` <- "5"). ``peak_rss_mb`` is ``VmHWM`` afterwards -- the peak RSS of the
@@ -61,6 +64,7 @@ EXTRA_FIELDS: dict[str, tuple] = {
     "inner": (int,),
     "poses": (int,),
     "per_frame_us": (float,),
+    "cpu_median_us": (float,),
     "peak_rss_mb": (float, type(None)),
     "peak_mem_mb": (float, type(None)),
     "max_abs_diff": (float, type(None)),
@@ -192,11 +196,13 @@ def _reset_peak() -> Optional[float]:
 
 
 def time_steady(call: Callable[[], Any], *, repeats: int, warmup: int = 2, min_repeat_s: float = 0.02,
-                budget_s: float = float("inf"), max_inner: int = 10_000) -> tuple[list[float], int]:
+                budget_s: float = float("inf"), max_inner: int = 10_000,
+                cpu_times: Optional[list] = None) -> tuple[list[float], int]:
     """Per-call seconds of the timed repeats (after ``warmup`` untimed calls) and the inner count used.
 
     The warm-up calls also estimate one call's cost, which fixes ``inner`` (a repeat lasts at least
     ``min_repeat_s``) and caps the repeats so their total stays within ``budget_s`` (at least 2).
+    ``cpu_times``, when given, receives the per-call process CPU seconds (all threads) of each repeat.
     """
     warm = []
     for _ in range(max(warmup, 1)):
@@ -208,10 +214,13 @@ def time_steady(call: Callable[[], Any], *, repeats: int, warmup: int = 2, min_r
     repeats = max(2, min(repeats, int(budget_s // (single * inner))))
     times = []
     for _ in range(repeats):
+        c = time.process_time()
         t = time.perf_counter()
         for _ in range(inner):
             jax.block_until_ready(call())
         times.append((time.perf_counter() - t) / inner)
+        if cpu_times is not None:
+            cpu_times.append((time.process_time() - c) / inner)
     return times, inner
 
 
@@ -247,14 +256,16 @@ def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repea
     jax.block_until_ready(call())
     if time.perf_counter() - t > 1.0:
         repeats, warmup = min(repeats, slow_repeats), 0
+    cpu: list = []
     times, inner = time_steady(call, repeats=repeats, warmup=warmup, min_repeat_s=min_repeat_s,
-                               budget_s=budget_s)
+                               budget_s=budget_s, cpu_times=cpu)
     peak = _status_mb("VmHWM") if rss0 is not None else None
     rec.update(
         repeats=len(times),
         inner=inner,
         min_us=min(times) * 1e6,
         median_us=statistics.median(times) * 1e6,
+        cpu_median_us=statistics.median(cpu) * 1e6,
         peak_rss_mb=peak,
         peak_mem_mb=None if peak is None else max(0.0, peak - rss0),
     )

@@ -71,6 +71,7 @@ def test_known_sleep_is_measured_within_tolerance():
     (rec,) = harness.run_case(_case([sleeper]), repeats=3, **QUIET)
     assert 15_000 <= rec["median_us"] <= 60_000
     assert rec["min_us"] <= rec["median_us"] and rec["inner"] == 1
+    assert 0 <= rec["cpu_median_us"] < 5_000  # sleeping uses no CPU: wall and CPU time are told apart
     assert rec["compile_s"] is None and rec["trace_s"] is None and rec["repeats"] == 3
     harness.validate_record(rec)
 
@@ -87,6 +88,7 @@ def test_jit_records_time_trace_lower_compile_apart():
         assert isinstance(rec[k], float) and rec[k] > 0
     assert rec["poses"] == 64 and rec["per_pose_us"] == pytest.approx(rec["median_us"] / 64)
     assert rec["per_frame_us"] == pytest.approx(rec["median_us"] / 64)  # batch 1: per frame = per pose
+    assert rec["cpu_median_us"] > 0
     harness.validate_record(rec)
 
 

@@ -1,4 +1,4 @@
-"""Markdown tables (every record; eager/jit and numpy/jit side by side; compile times) and the scaling plot."""
+"""Markdown tables (every record; eager/jit and numpy/jit side by side; compile times), scaling plot."""
 
 from __future__ import annotations
 
@@ -68,7 +68,8 @@ def compile_table(records: list[dict]) -> str:
     rows = [r for r in records if r.get("compile_s") is not None]
     if not rows:
         return ""
-    lines = ["| case | impl | trace s | lower s | compile s | per-frame µs |", "|---|---|---:|---:|---:|---:|"]
+    lines = ["| case | impl | trace s | lower s | compile s | per-frame µs |",
+             "|---|---|---:|---:|---:|---:|"]
     for r in rows:
         cells = [f"{r[k]:.2f}" if r.get(k) is not None else "" for k in ("trace_s", "lower_s", "compile_s")]
         per_frame = r.get("per_frame_us", r["median_us"] / r["frames"])

@@ -1,16 +1,17 @@
 """Timing harness: trace / lower / compile separately from steady state, warm-up, repeats, peak memory.
 
 A :class:`Case` is one workload (name, batch, frames) with several :class:`Impl` implementations of the
-same computation on the same weights (``jit``, ``eager``, ``numpy`` ...). :func:`run_case` first runs
-every implementation once and checks that it produces the same output as the first one
-(:func:`check_equal`; nothing is timed when they disagree -- a benchmark that times a wrong implementation
-is worse than none), then times each:
+same computation on the same weights (``jit``, ``eager``, ``numpy`` ...). :func:`run_case` first prepares
+every implementation (:func:`prepare`: compile, one call) and checks that it produces the same output as
+the first one (:func:`check_equal`; no steady state is timed when they disagree -- a benchmark that times
+a wrong implementation is worse than none), then times each:
 
 * jit impls (``kind="jit"``): the in-memory JAX caches are cleared, then ``jax.jit(f).trace(*args)``,
   ``.lower()`` and ``.compile()`` are timed one by one (``trace_s``, ``lower_s``, ``compile_s``), and the
-  resulting ``Compiled`` executable is what runs in steady state. The persistent compilation cache is
-  switched off by :func:`configure_jax` (``python -m benchmarks`` calls it) so ``compile_s`` is a real
-  compile, not a disk read;
+  resulting ``Compiled`` executable gives the output of the equality check and runs in steady state (one
+  compilation per implementation). The persistent compilation cache is switched off by
+  :func:`configure_jax` (``python -m benchmarks`` calls it) so ``compile_s`` is a real compile, not a disk
+  read;
 * other impls (eager JAX under ``jax.disable_jit()``, NumPy, ...): steady state only, ``compile_s`` null.
 
 Steady state: warm-up calls (at least one: eager JAX caches one executable per primitive on first use),
@@ -26,11 +27,12 @@ process CPU time per call (all threads): on a loaded machine the wall-clock numb
 load while the CPU time of single-threaded work barely moves, so comparing the two tells a slow
 implementation from a busy machine (CPU / wall ~ 2 on an idle 2-core machine running both cores).
 
-Peak memory (Linux): before each implementation is timed the kernel's resident-set high-water mark is
-reset (``/proc/self/clear_refs`` <- "5"). ``peak_rss_mb`` is ``VmHWM`` afterwards -- the peak RSS of the
-whole process while that implementation was traced, compiled and run -- and ``peak_mem_mb`` is that peak
-minus the RSS just before (what the implementation added at its peak: compiled code, buffers, temporaries;
-the inputs and weights, built before, are not counted). Both are ``None`` where the reset is not allowed.
+Peak memory (Linux): the kernel's resident-set high-water mark is reset (``/proc/self/clear_refs`` <- "5")
+before an implementation is prepared and again before its steady state. ``peak_rss_mb`` is the larger
+``VmHWM`` of the two phases -- the peak RSS of the whole process while that implementation was traced,
+compiled and run -- and ``peak_mem_mb`` the larger increase over the RSS at the start of each phase (what
+the implementation added at its peak: compiled code, buffers, temporaries; the inputs and weights, built
+before, are not counted). Both are ``None`` where the reset is not allowed.
 """
 
 from __future__ import annotations
@@ -224,15 +226,27 @@ def time_steady(call: Callable[[], Any], *, repeats: int, warmup: int = 2, min_r
     return times, inner
 
 
-def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repeat_s: float = 0.02,
-            budget_s: float = 20.0, slow_repeats: int = 3) -> dict:
-    """Time one implementation; returns the timing and memory fields of a record."""
+@dataclasses.dataclass
+class Prepared:
+    """An implementation ready to be timed (see :func:`prepare`)."""
+
+    call: Callable[[], Any]  # one call on the case's arguments (the compiled executable for jit impls)
+    timings: dict  # trace_s / lower_s / compile_s (None for non-jit impls)
+    first_call_s: float  # seconds of the first call (slow implementations get fewer repeats)
+    rss0: Optional[float]  # RSS (MB) before tracing, None where the high-water mark cannot be reset
+    peak: Optional[float]  # RSS high-water mark (MB) after compiling and the first call
+
+
+def prepare(impl: Impl, args: tuple) -> tuple[Prepared, Any]:
+    """Compile (jit: trace / lower / compile timed apart) and call once; returns it and the first output.
+
+    The in-memory JAX caches are cleared first, so the three times are those of a first call even when
+    the same function was compiled before (the persistent cache is off, see :func:`configure_jax`).
+    """
     rss0 = _reset_peak()
-    rec: dict = {"trace_s": None, "lower_s": None, "compile_s": None}
+    timings: dict = {"trace_s": None, "lower_s": None, "compile_s": None}
     if impl.kind == "jit":
         jitted = _as_jitted(impl)
-        # The equality check compiled this computation already: drop the in-memory caches so that the
-        # trace / lower / compile times are those of a first call.
         jax.clear_caches()
         t0 = time.perf_counter()
         traced = jitted.trace(*args)
@@ -241,7 +255,7 @@ def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repea
         t2 = time.perf_counter()
         compiled = lowered.compile()
         t3 = time.perf_counter()
-        rec.update(trace_s=t1 - t0, lower_s=t2 - t1, compile_s=t3 - t2)
+        timings.update(trace_s=t1 - t0, lower_s=t2 - t1, compile_s=t3 - t2)
 
         def call():
             return compiled(*args)
@@ -250,16 +264,32 @@ def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repea
         def call():
             return impl.fn(*args)
 
-    # A first call tells slow implementations (eager JAX on long clips) apart: one warm-up and fewer
-    # repeats for those, so the suite stays within its time budget.
     t = time.perf_counter()
-    jax.block_until_ready(call())
-    if time.perf_counter() - t > 1.0:
-        repeats, warmup = min(repeats, slow_repeats), 0
-    cpu: list = []
-    times, inner = time_steady(call, repeats=repeats, warmup=warmup, min_repeat_s=min_repeat_s,
-                               budget_s=budget_s, cpu_times=cpu)
+    out = jax.block_until_ready(call())
+    first = time.perf_counter() - t
     peak = _status_mb("VmHWM") if rss0 is not None else None
+    return Prepared(call, timings, first, rss0, peak), out
+
+
+def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repeat_s: float = 0.02,
+            budget_s: float = 20.0, slow_repeats: int = 3, prepared: Optional[Prepared] = None) -> dict:
+    """Time one implementation (after :func:`prepare`, done here unless given); timing and memory fields."""
+    if prepared is None:
+        prepared, _ = prepare(impl, args)
+    rec: dict = dict(prepared.timings)
+    # The first call tells slow implementations (eager JAX on long clips) apart: one warm-up and fewer
+    # repeats for those, so the suite stays within its time budget.
+    if prepared.first_call_s > 1.0:
+        repeats, warmup = min(repeats, slow_repeats), 0
+    rss_run = _reset_peak() if prepared.rss0 is not None else None
+    cpu: list = []
+    times, inner = time_steady(prepared.call, repeats=repeats, warmup=warmup, min_repeat_s=min_repeat_s,
+                               budget_s=budget_s, cpu_times=cpu)
+    peak = peak_mem = None
+    if prepared.rss0 is not None and rss_run is not None:
+        peak_run = _status_mb("VmHWM")
+        peak = max(prepared.peak, peak_run)
+        peak_mem = max(0.0, prepared.peak - prepared.rss0, peak_run - rss_run)
     rec.update(
         repeats=len(times),
         inner=inner,
@@ -267,27 +297,29 @@ def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repea
         median_us=statistics.median(times) * 1e6,
         cpu_median_us=statistics.median(cpu) * 1e6,
         peak_rss_mb=peak,
-        peak_mem_mb=None if peak is None else max(0.0, peak - rss0),
+        peak_mem_mb=peak_mem,
     )
     return rec
 
 
 def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = None, check: bool = True,
              budget_s: float = 20.0, log: Callable[[str], None] = print) -> list[dict]:
-    """Check the implementations agree, then time each; one record per implementation.
+    """Prepare every implementation (compile, one call), check they agree, then time each; one record each.
 
-    Raises :class:`EqualityError` (before anything is timed) when an implementation disagrees.
+    Raises :class:`EqualityError` (before any steady-state timing) when an implementation disagrees.
     """
     args = case.make_args()
     chosen = [i for i in case.impls if impls is None or i.name in impls]
-    diffs: dict = {}
-    if check and len(chosen) > 1:
-        outputs = {}
-        for impl in chosen:
-            fn = _as_jitted(impl) if impl.kind == "jit" else impl.fn
-            outputs[impl.name] = jax.device_get(fn(*args))
-        diffs = check_equal(outputs, rtol=case.rtol, atol=case.atol)
-        del outputs
+    compare = check and len(chosen) > 1
+    prepared: dict = {}
+    outputs: dict = {}
+    for impl in chosen:
+        prepared[impl.name], out = prepare(impl, args)
+        if compare:
+            outputs[impl.name] = jax.device_get(out)
+        del out
+    diffs: dict = check_equal(outputs, rtol=case.rtol, atol=case.atol) if compare else {}
+    del outputs
     records = []
     for impl in chosen:
         rec = {
@@ -300,7 +332,8 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
             "note": case.note,
             "max_abs_diff": diffs.get(impl.name),
         }
-        rec.update(measure(impl, args, repeats=repeats, budget_s=budget_s, slow_repeats=case.max_repeats_slow))
+        rec.update(measure(impl, args, repeats=repeats, budget_s=budget_s, slow_repeats=case.max_repeats_slow,
+                           prepared=prepared.pop(impl.name)))
         rec["per_pose_us"] = rec["median_us"] / case.num_poses
         rec["per_frame_us"] = rec["median_us"] / case.frames
         log(f"  {case.name:<28} {impl.name:<6} {rec['median_us'] / 1e3:10.3f} ms/call "

@@ -92,6 +92,18 @@ def test_jit_records_time_trace_lower_compile_apart():
     harness.validate_record(rec)
 
 
+def test_each_jit_impl_is_compiled_once_and_its_executable_checked_and_timed():
+    traces = []
+
+    def f(x):
+        traces.append(1)  # runs once per trace
+        return jnp.sin(x) * 2.0
+
+    recs = harness.run_case(_case([harness.Impl("jit", f, kind="jit"),
+                                   harness.Impl("numpy", lambda x: np.sin(x) * 2.0)]), repeats=2, **QUIET)
+    assert len(traces) == 1 and recs[0]["compile_s"] > 0 and recs[1]["max_abs_diff"] < 1e-6
+
+
 def test_record_schema_is_validated():
     harness.validate_record(_record())
     harness.validate_record(_record(compile_s=None))

@@ -146,7 +146,7 @@ def _synthetic_dir() -> pathlib.Path:
 
 
 def _tgst_setup(batch_size: int):
-    """Tiny TGST config fitted to the synthetic data (as ``tgst train`` does), both batches = ``batch_size``."""
+    """Tiny TGST config fitted to the synthetic data (as ``tgst train`` does); both batches ``batch_size``."""
     import dataclasses
 
     from jaxgest.tgst import data as tdata
@@ -198,7 +198,7 @@ def build_tgst_transformer(seed: int, batch_size: int):
 
 @register("zeggs")
 def build_zeggs(seed: int, batch_size: int):
-    """ZeroEGGS (tiny preset) on BVH + WAV: the RAdam step of ``jaxgest zeggs train`` (dropout, VAE sample)."""
+    """ZeroEGGS (tiny preset) on BVH + WAV: the RAdam step of ``zeggs train`` (dropout, VAE sample)."""
     from jaxgest.motion.datasets import load_folder
     from jaxgest.training import TrainState
     from jaxgest.zeggs import data as zdata
@@ -358,7 +358,8 @@ def main(argv=None) -> int:
     p.add_argument("--host-local", action="store_true", help="each host builds only its block of the batch")
     p.add_argument("--list", action="store_true", help="print the registered model names and exit")
     p.add_argument("--real-train", action="store_true",
-                   help="also run the tgst/zeggs train() entry points on --devices (config.json, metrics.jsonl)")
+                   help="also run the tgst/zeggs train() entry points on --devices (config.json, "
+                   "metrics.jsonl)")
     args = p.parse_args(argv)
     if args.list:
         print(json.dumps(sorted(BUILDERS)))

@@ -1,8 +1,8 @@
 """Bad input through the command line: exit status 2, ONE line on stderr naming the file and the problem.
 
 Every case runs ``jaxgest.cli.main([...])`` in-process on tiny trained models (TGST 2+2 steps, ZeroEGGS 2
-steps on the synthetic data) and checks: status 2; stderr is exactly one line (the CLI drops progress bars when
-stderr is not a terminal) starting with ``jaxgest: ``, naming the file (or the argument) and the
+steps on the synthetic data) and checks: status 2; stderr is exactly one line (the CLI drops progress bars
+when stderr is not a terminal) starting with ``jaxgest: ``, naming the file (or the argument) and the
 problem, with no traceback; and the output folder holds no new file (no partial or temporary output).
 
 Documented behaviours checked here as successes: silent speech generates (finite features, SPEC §4), audio
@@ -35,7 +35,8 @@ def ctx(tmp_path_factory):
     data = root / "data"
     write_dataset(data, clips=4, seconds=3, progress=False)
     tw, zw = root / "tgst", root / "zeggs"
-    tgst_train(data, tw, preset="tiny", ae_steps=2, transformer_steps=2, progress=False, log_every=1, ckpt_every=2)
+    tgst_train(data, tw, preset="tiny", ae_steps=2, transformer_steps=2, progress=False, log_every=1,
+               ckpt_every=2)
     zeggs_train(data, zw, preset="tiny", steps=2, progress=False, log_every=1)
     zp = root / "zeggs_pca"
     shutil.copytree(zw, zp)
@@ -155,7 +156,8 @@ def test_bad_bvh_as_tgst_content(ctx, capsys, case, name, expected):
     ("nan", "nan.bvh", ["nan.bvh:", "motion row contains NaN or inf"]),
     ("too_short", "short.bvh", ["short", "is too short for a style example"]),
     pytest.param("unmapped", "unmapped.bvh", ["unmapped", "matches no joint map"], marks=pytest.mark.xfail(
-        strict=True, reason="jaxgest/zeggs (not owned here): the joint-map error of a style clip does not name "
+        strict=True, reason="jaxgest/zeggs (not owned here): the joint-map error of a style clip does not "
+        "name "
         "the file ('skeleton with joints Base, Arm, ... matches no joint map ...')")),
 ])
 def test_bad_bvh_as_zeggs_style(ctx, capsys, case, name, expected):
@@ -171,7 +173,7 @@ def test_bad_bvh_as_tgst_style(ctx, capsys):
     assert rc == 2 and "short.bvh: style clip too short" in msg, msg
 
 
-# ----- audio -------------------------------------------------------------------------------------------------
+# ----- audio ------------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("name,expected", [
     ("nan.wav", "nan.wav: audio contains NaN or inf samples"),
@@ -198,7 +200,7 @@ def test_silent_or_resampled_audio_generates(ctx, capsys, name):
     assert np.all(np.isfinite(m.rotations)) and np.all(np.isfinite(m.translations))
 
 
-# ----- training folders --------------------------------------------------------------------------------------
+# ----- training folders -------------------------------------------------------------------------------------
 
 def _folder_with_short_audio(ctx, tmp_path, cut_s):
     folder = tmp_path / "data"
@@ -211,7 +213,8 @@ def _folder_with_short_audio(ctx, tmp_path, cut_s):
 
 def test_training_audio_within_the_length_tolerance_trains(ctx, capsys, tmp_path):
     folder = _folder_with_short_audio(ctx, tmp_path, 0.5)
-    rc, stdout = run_cli(["zeggs", "train", "--data", folder, "--workdir", tmp_path / "w", "--steps", "0"], capsys)
+    rc, stdout = run_cli(["zeggs", "train", "--data", folder, "--workdir", tmp_path / "w", "--steps", "0"],
+                         capsys)
     assert rc == 0 and "trained 0 steps" in stdout
 
 
@@ -229,11 +232,12 @@ def test_training_folder_with_a_malformed_bvh(ctx, capsys, tmp_path):
     shutil.copytree(ctx["data"], folder)
     (folder / "greeting_sad_0.bvh").write_text((ctx["bad"] / "truncated.bvh").read_text())
     for model in ("tgst", "zeggs"):
-        rc, msg = run_cli([model, "train", "--data", folder, "--workdir", tmp_path / model, "--steps", "0"], capsys)
+        argv = [model, "train", "--data", folder, "--workdir", tmp_path / model, "--steps", "0"]
+        rc, msg = run_cli(argv, capsys)
         assert rc == 2 and "greeting_sad_0.bvh" in msg, msg
 
 
-# ----- blend weights, PCA ------------------------------------------------------------------------------------
+# ----- blend weights, PCA -----------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("weights,expected", [
     ("0.5", "blend weights: got 1 weight(s) for 2 style clip(s)"),
@@ -251,8 +255,8 @@ def test_bad_blend_weights(ctx, capsys, weights, expected):
 def test_pca_component_that_does_not_exist(ctx, capsys):
     out = _out(ctx)
     rc, msg = run_cli(_generate(ctx, workdir=ctx["zp"], out=out, extra=["--pca-edit", "99=1.0"]), capsys, out)
-    assert rc == 2 and re.search(r"PCA component 99 does not exist \(the fitted PCA has components 0\.\.\d+\)",
-                                 msg), msg
+    expected = r"PCA component 99 does not exist \(the fitted PCA has components 0\.\.\d+\)"
+    assert rc == 2 and re.search(expected, msg), msg
     rc, msg = run_cli(_generate(ctx, workdir=ctx["zp"], out=out, extra=["--pca-edit", "0=1.0"]), capsys, out)
     assert rc == 0 and out.exists()  # an existing component works
     out.unlink()
@@ -264,7 +268,7 @@ def test_pca_edit_without_a_fitted_pca(ctx, capsys):
     assert rc == 2 and "pca.json: no PCA fitted yet (run `jaxgest zeggs pca" in msg, msg
 
 
-# ----- workdirs and checkpoints ------------------------------------------------------------------------------
+# ----- workdirs and checkpoints -----------------------------------------------------------------------------
 
 def test_workdir_without_anything(ctx, capsys, tmp_path):
     empty = tmp_path / "empty"
@@ -303,12 +307,13 @@ def test_checkpoint_of_another_preset(ctx, capsys, tmp_path, model):
     before = {p: p.read_bytes() for p in work.rglob("*") if p.is_file()}
     rc, msg = run_cli([model, "train", "--data", ctx["data"], "--workdir", work, "--preset", "paper",
                        "--steps", "0"], capsys)
-    assert rc == 2 and "checkpoint does not match the requested model" in msg and "use another --workdir" in msg
+    assert rc == 2 and "checkpoint does not match the requested model" in msg
+    assert "use another --workdir" in msg
     assert str(work) in msg
     assert {p: p.read_bytes() for p in work.rglob("*") if p.is_file()} == before  # nothing was touched
 
 
-# ----- output paths ------------------------------------------------------------------------------------------
+# ----- output paths -----------------------------------------------------------------------------------------
 
 def test_output_in_a_missing_directory(ctx, capsys):
     missing = ctx["root"] / "no_such_dir"

@@ -1,4 +1,4 @@
-"""Runs killed with SIGKILL resume from their last complete checkpoint and end where an uninterrupted run ends.
+"""Runs killed with SIGKILL resume from their last complete checkpoint and end like an uninterrupted run.
 
 Subprocesses run the real command line (``python -m jaxgest.cli tgst train`` / ``zeggs train``, the code
 behind the ``jaxgest`` script) on the tiny synthetic dataset. A run is killed once a complete checkpoint
@@ -127,10 +127,11 @@ def metrics(workdir: pathlib.Path) -> list:
 
 
 def _losses(lines, stage):
-    return {r["step"]: {k: v for k, v in r.items() if k != "steps_per_s"} for r in lines if r["stage"] == stage}
+    return {r["step"]: {k: v for k, v in r.items() if k != "steps_per_s"}
+            for r in lines if r["stage"] == stage}
 
 
-# ----- TGST --------------------------------------------------------------------------------------------------
+# ----- TGST -------------------------------------------------------------------------------------------------
 
 TGST_AE, TGST_TR = 8, 16
 
@@ -199,7 +200,7 @@ def test_tgst_killed_during_a_save_resumes_from_the_previous_checkpoint(data, en
                          params_at(tgst_reference / "checkpoints" / stage, step))
 
 
-# ----- ZeroEGGS ----------------------------------------------------------------------------------------------
+# ----- ZeroEGGS ---------------------------------------------------------------------------------------------
 
 #: ``zeggs train`` checkpoints every max(50, steps // 10) steps and at the end; it logs every 25 steps.
 ZEGGS_STEPS = 100
@@ -234,7 +235,7 @@ def test_zeggs_killed_resumes_to_the_same_parameters(data, env, tmp_path):
     assert_identical(params_at(ckpt, ZEGGS_STEPS), params_at(ref / "checkpoints" / "zeggs", ZEGGS_STEPS))
 
 
-# ----- non-finite loss ---------------------------------------------------------------------------------------
+# ----- non-finite loss --------------------------------------------------------------------------------------
 
 def _nan_problem(bad_step: int, where: str):
     """A linear regression whose loss (``where="loss"``) or only its gradient (``"grad"``, the loss stays

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from jaxgest.errors import JaxgestError
 from jaxgest.motion import rotations as R
 from jaxgest.zeggs import features as Fe
 from jaxgest.zeggs import losses as L
@@ -138,7 +139,8 @@ def test_scan_generator_equals_python_loop(params):
     mean = jnp.asarray(np.linspace(-1, 1, P), jnp.float32)
     std = jnp.asarray(np.linspace(0.5, 2, P), jnp.float32)
     scan = jax.jit(lambda p, *a: S.ZeggsModel(CFG).apply({"params": p}, *a, mean, std,
-                                                          method=S.ZeggsModel.generate))
+                                                          method=S.ZeggsModel.generate),
+                   compiler_options=CFG.compiler_options)
     pose0, rp0, rr0, facing, speech, style = _gen_inputs()
     out = scan(params, speech, style, pose0, rp0, rr0, facing)
     ref = generate_loop_reference(CFG, params["generator"], pose0, rp0, rr0, facing, speech, style, mean, std)
@@ -202,7 +204,7 @@ def test_train_step_decreases_loss_without_retrace(params):
     mean = rng.normal(size=P).astype(np.float32)
     std = rng.uniform(0.5, 2.0, size=P).astype(np.float32)
     step = jax.jit(chex.assert_max_traces(S.make_train_step(CFG, tx, pose_mean=mean, pose_std=std), n=1),
-                   donate_argnums=(0,))
+                   donate_argnums=(0,), compiler_options=CFG.compiler_options)
     batch = _batch()
     key = jax.random.PRNGKey(0)
     losses = []
@@ -226,3 +228,38 @@ def test_optimizer_is_radam_with_staircase_decay():
     np.testing.assert_allclose(upd["w"], -cfg.learning_rate * np.ones(3), rtol=1e-5)
     sched = optax.exponential_decay(1e-4, 1000, 0.995, staircase=True)
     assert float(sched(999)) == pytest.approx(1e-4) and float(sched(1000)) == pytest.approx(0.995e-4)
+
+
+def test_compile_options_tiny_only_and_cli_overrides():
+    from jaxgest.zeggs.cli import parse_overrides
+    from jaxgest.zeggs.config import config_from_dict
+
+    paper = get_config("paper")
+    assert paper.xla_opt_level is None and paper.compiler_options is None  # the paper preset: XLA defaults
+    assert CFG.compiler_options == {"xla_backend_optimization_level": 0}
+    assert config_from_dict(CFG.to_dict()) == CFG
+    old = {k: v for k, v in paper.to_dict().items() if k != "xla_opt_level"}  # a config.json from before the field
+    assert config_from_dict(old) == paper
+    o = parse_overrides(["xla_opt_level=none", "gru_hidden=128", "speech_channels=32,32", "mirror=false",
+                         "learning_rate=3e-4"])
+    assert o == {"xla_opt_level": None, "gru_hidden": 128, "speech_channels": (32, 32), "mirror": False,
+                 "learning_rate": 3e-4}
+    for bad in ("gru=3", "num_joints=4", "gru_hidden=big", "mirror=maybe", "gru_hidden"):
+        with pytest.raises(JaxgestError, match="--override"):
+            parse_overrides([bad])
+
+
+def test_to_world_equals_quaternion_rotation(key):
+    k1, k2, k3 = jax.random.split(key, 3)
+    parts = {n: jax.random.normal(k, (2, 5, 3, d)) for n, k, d in
+             zip(("position", "rotation", "velocity", "angular"), jax.random.split(k1, 4), (3, 6, 3, 3))}
+    q = R.quat_normalize(jax.random.normal(k2, (2, 5, 4)))
+    r = jax.random.normal(k3, (2, 5, 3))
+    w = L.to_world(parts, r, q)
+    qj = q[:, :, None]
+    np.testing.assert_allclose(w["position"], R.quat_rotate(qj, parts["position"]) + r[:, :, None], atol=1e-5)
+    rot = parts["rotation"]
+    np.testing.assert_allclose(w["rotation"], jnp.concatenate(
+        [R.quat_rotate(qj, rot[..., :3]), R.quat_rotate(qj, rot[..., 3:])], -1), atol=1e-5)
+    for n in ("velocity", "angular"):
+        np.testing.assert_allclose(w[n], R.quat_rotate(qj, parts[n]), atol=1e-5)

@@ -20,6 +20,8 @@ def register(subparsers) -> None:
     t.add_argument("--steps", type=int, default=None, help="total training steps (default: tiny 300)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
+    t.add_argument("--override", action="append", default=[], metavar="FIELD=VALUE",
+                   help="replace a config field of the preset, e.g. gru_hidden=128 or speech_channels=32,32")
     t.set_defaults(func=_train)
 
     g = sub.add_parser("generate", help="gestures for a speech file in the style of example clip(s)")
@@ -52,11 +54,45 @@ def register(subparsers) -> None:
 def _train(args) -> int:
     from jaxgest.zeggs.train import train
 
-    r = train(args.data, args.workdir, preset=args.preset, steps=args.steps, seed=args.seed, devices=args.devices)
+    r = train(args.data, args.workdir, preset=args.preset, steps=args.steps, seed=args.seed, devices=args.devices,
+              overrides=parse_overrides(args.override))
     final = r["final"]
     print(f"zeggs: trained {r['steps']} steps (resumed from {r['start_step']}) on {r['devices']} device(s) in "
           f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}; workdir {args.workdir}")
     return 0
+
+
+def parse_overrides(items) -> dict:
+    """``["gru_hidden=128", "speech_channels=32,32", "mirror=false"]`` -> typed config overrides."""
+    import dataclasses
+
+    from jaxgest.zeggs.config import ZeggsConfig
+
+    fields = {f.name: f for f in dataclasses.fields(ZeggsConfig)}
+    defaults = ZeggsConfig()
+    out = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or name not in fields or name == "num_joints":
+            raise JaxgestError(f"--override {item!r}: expected FIELD=VALUE with FIELD a ZeroEGGS config field "
+                               "(see jaxgest/zeggs/config.py; num_joints comes from the data)")
+        default = getattr(defaults, name)
+        try:
+            if default is None:  # optional int (xla_opt_level)
+                value = None if text.lower() == "none" else int(text)
+            elif isinstance(default, bool):
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError
+                value = text.lower() in ("true", "1")
+            elif isinstance(default, tuple):
+                value = tuple(int(x) for x in text.split(",") if x.strip())
+            else:
+                value = type(default)(text)
+        except ValueError:
+            raise JaxgestError(f"--override {item!r}: {text!r} is not a valid {type(default).__name__}") from None
+        out[name] = value
+    return out
 
 
 def _parse_weights(text):

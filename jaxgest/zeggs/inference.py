@@ -73,11 +73,27 @@ class ZeggsModel_:
         self.params = jax.tree_util.tree_map(jnp.asarray, params)
         self._mean = jnp.asarray(self.pose_stats.mean, jnp.float32)
         self._std = jnp.asarray(self.pose_stats.std, jnp.float32)
-        model = ZeggsModel(self.cfg)
-        self._encode_style = jax.jit(lambda p, s, m: model.apply({"params": p}, s, m, method=ZeggsModel.encode_style))
-        self._encode_speech = jax.jit(lambda p, s: model.apply({"params": p}, s, method=ZeggsModel.encode_speech))
-        self._generate = jax.jit(lambda p, s, e, y0, r0, q0, f, mean, std: model.apply(
-            {"params": p}, s, e, y0, r0, q0, f, mean, std, method=ZeggsModel.generate))
+        self._fns = _jitted(self.cfg)
+
+    def _encode_style(self, params, style, mask):
+        """Style posterior of ``(b, S, P)`` clips; lengths padded (masked) to a bucket: few compilations."""
+        S = style.shape[1]
+        L = bucket_length(S)
+        style = jnp.pad(jnp.asarray(style), ((0, 0), (0, L - S), (0, 0)))
+        mask = jnp.pad(jnp.asarray(mask, bool), ((0, 0), (0, L - S)))
+        return self._fns["encode_style"](params, style, mask)
+
+    def _encode_speech(self, params, speech):
+        return self._fns["encode_speech"](params, speech)
+
+    def _generate(self, params, s_emb, e, y0, r0, q0, f, mean, std):
+        """The generator over ``s_emb (b, F, D_S)``; F padded to a bucket (the generator is causal: frames
+        after F do not change frames before it) and the output cut back to F frames."""
+        F = s_emb.shape[1]
+        L = bucket_length(F)
+        s_emb = jnp.pad(s_emb, ((0, 0), (0, L - F), (0, 0)))
+        out = self._fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
+        return {k: v[:, :F] for k, v in out.items()}
 
     # -- pieces ------------------------------------------------------------------------------------------
     def style_features(self, style: Motion) -> np.ndarray:
@@ -162,6 +178,30 @@ class ZeggsModel_:
         out_frames = max(1, int(round(duration * target.fps)))
         motion = resample_motion(motion, target.fps)
         return _fit_frames(motion, out_frames)
+
+
+def bucket_length(n: int, smallest: int = 64) -> int:
+    """The smallest of 64, 96, 128, 192, 256, 384, ... (2^k and 1.5 * 2^k) that is >= ``n``: sequence
+    lengths padded to these share a compilation (at most 1.5x the frames)."""
+    L = smallest
+    while L < n:
+        L = L * 3 // 2 if (L & (L - 1)) == 0 else L * 4 // 3
+    return L
+
+
+@functools.lru_cache(maxsize=8)
+def _jitted(cfg) -> dict:
+    """The jitted inference functions of a config (shared by every workdir with that config)."""
+    model = ZeggsModel(cfg)
+    opts = cfg.compiler_options
+    return {
+        "encode_style": jax.jit(lambda p, s, m: model.apply({"params": p}, s, m, method=ZeggsModel.encode_style),
+                                compiler_options=opts),
+        "encode_speech": jax.jit(lambda p, s: model.apply({"params": p}, s, method=ZeggsModel.encode_speech),
+                                 compiler_options=opts),
+        "generate": jax.jit(lambda p, s, e, y0, r0, q0, f, mean, std: model.apply(
+            {"params": p}, s, e, y0, r0, q0, f, mean, std, method=ZeggsModel.generate), compiler_options=opts),
+    }
 
 
 def _fit_frames(motion: Motion, frames: int) -> Motion:

@@ -23,6 +23,7 @@ teacher forcing, KL annealing).
 
 from __future__ import annotations
 
+import functools
 from typing import Callable, Optional
 
 import chex
@@ -89,15 +90,34 @@ def dummy_inputs(cfg: ZeggsConfig, batch: int = 1, frames: int = 4, style_frames
             jnp.zeros((batch, 3)).at[:, 2].set(1.0))
 
 
-def init_params(cfg: ZeggsConfig, key: jax.Array):
-    """Freshly initialised parameters ``{"speech_encoder", "style_encoder", "generator"}``."""
+def _init(cfg: ZeggsConfig, key: jax.Array):
     k_init, k_sample = jax.random.split(key)
-    model, inputs = ZeggsModel(cfg), dummy_inputs(cfg)
-    return jax.jit(lambda k, s: model.init({"params": k}, *inputs, s)["params"])(k_init, k_sample)
+    return ZeggsModel(cfg).init({"params": k_init}, *dummy_inputs(cfg), k_sample)["params"]
 
 
+@functools.lru_cache(maxsize=16)
+def _init_jit(cfg: ZeggsConfig):
+    return jax.jit(functools.partial(_init, cfg), compiler_options=cfg.compiler_options)
+
+
+def init_params(cfg: ZeggsConfig, key: jax.Array):
+    """Freshly initialised parameters ``{"speech_encoder", "style_encoder", "generator"}``.
+
+    Called eagerly, one jitted function per config (cached, compiled with ``cfg.compiler_options``):
+    repeated calls with the same config compile once. Under a trace (``jit``, ``eval_shape``) it is traced
+    inline.
+    """
+    if isinstance(key, jax.core.Tracer):
+        return _init(cfg, key)
+    return _init_jit(cfg)(key)
+
+
+@functools.lru_cache(maxsize=16)
 def make_optimizer(cfg: ZeggsConfig) -> optax.GradientTransformation:
     """RAdam with learning rate ``lr * decay ** (step // decay_steps)`` (staircase exponential decay).
+
+    Cached per config: the same object for the same config, so train states built from it have equal
+    tree structures (their compiled steps can be reused).
 
     References: Ghorbani et al. 2023, §4.3 (Liu et al. 2019 RAdam, 1e-4, x0.995 every 1k iterations).
     """

@@ -35,6 +35,8 @@ from jaxgest.zeggs.steps import init_params, make_optimizer, make_train_step
 
 KIND = "zeggs"
 CKPT_SUBDIR = "checkpoints/zeggs"
+IGNORED = ("steps", "xla_opt_level")  # config keys a resumed run may change (no effect on the parameters)
+_COMPILED: dict = {}  # (config, statistics, devices, argument shapes) -> compiled train step, per process
 
 
 def _config_for(preset: str, skeleton, overrides: Optional[dict] = None):
@@ -72,7 +74,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
     mesh = parallel.make_mesh(devices)
     info = parallel.device_info(mesh)
     meta_config = {"preset": preset, **cfg.to_dict()}
-    ckpt = Checkpointer(workdir, kind=KIND, config=meta_config, skeleton=skeleton.signature(), subdir=CKPT_SUBDIR)
+    ckpt = Checkpointer(workdir, kind=KIND, config=meta_config, skeleton=skeleton.signature(), subdir=CKPT_SUBDIR,
+                        ignore=IGNORED)
     if ckpt.latest_step() is not None:  # refuse a mismatching workdir before touching any of its files
         ckpt.check_meta(ckpt.stored_meta())
     if jax.process_index() == 0:
@@ -88,13 +91,12 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
             **info})
 
     tx = make_optimizer(cfg)
-    params = jax.jit(lambda k: init_params(cfg, k))(jax.random.PRNGKey(seed))
+    params = init_params(cfg, jax.random.PRNGKey(seed))
     state = TrainState.create(apply_fn=None, params=params, tx=tx).replace(step=jnp.asarray(0, jnp.int32))
     state = parallel.replicate(state, mesh)
     state = ckpt.restore(state)
     start = int(jax.device_get(state.step))
-    step_fn = parallel.parallelize_step(
-        make_train_step(cfg, tx, pose_mean=data.pose_stats.mean, pose_std=data.pose_stats.std), mesh)
+    step_fn = _compiled_step(cfg, tx, data.pose_stats, mesh)
 
     def batch_fn(i):
         return data.batch(i, seed=seed, batch=cfg.batch_size, window=cfg.window,
@@ -113,6 +115,29 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
             "sequences": len(data.sequences), "pose_dim": data.pose_dim}
 
 
+def _compiled_step(cfg, tx, pose_stats, mesh):
+    """The data-parallel jitted train step, compiled on first call with ``cfg.compiler_options``.
+
+    Compiled executables are kept per (config, pose statistics, devices, argument shapes) in this process,
+    so a resumed or repeated ``train`` in the same process does not compile again.
+    """
+    jitted = parallel.parallelize_step(
+        make_train_step(cfg, tx, pose_mean=pose_stats.mean, pose_std=pose_stats.std), mesh)
+    base = (cfg, np.asarray(pose_stats.mean, np.float32).tobytes(), np.asarray(pose_stats.std, np.float32).tobytes(),
+            tuple(d.id for d in mesh.devices.flat))
+
+    def step(state, batch, key):
+        leaves, tree = jax.tree_util.tree_flatten((state, batch, key))
+        k = base + (tree, tuple((tuple(x.shape), str(x.dtype)) for x in leaves))
+        if k not in _COMPILED:
+            if len(_COMPILED) >= 4:
+                _COMPILED.pop(next(iter(_COMPILED)))
+            _COMPILED[k] = jitted.lower(state, batch, key).compile(cfg.compiler_options)
+        return _COMPILED[k](state, batch, key)
+
+    return step
+
+
 def load_workdir(workdir):
     """``(cfg, params, pose_stats, speech_stats, reference Motion, config.json dict)`` of a trained workdir."""
     workdir = pathlib.Path(workdir)
@@ -125,7 +150,7 @@ def load_workdir(workdir):
         raise CheckpointError(f"{workdir}: holds a {meta.get('model', 'unknown')!r} model, not a ZeroEGGS model")
     cfg = config_from_dict(meta["config"])
     ckpt = Checkpointer(workdir, kind=KIND, config={"preset": meta["preset"], **cfg.to_dict()},
-                        skeleton=meta["skeleton"], subdir=CKPT_SUBDIR, read_only=True)
+                        skeleton=meta["skeleton"], subdir=CKPT_SUBDIR, read_only=True, ignore=IGNORED)
     template = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
     params = ckpt.restore_params(jax.tree_util.tree_map(lambda s: np.zeros(s.shape, s.dtype), template))
     ckpt.close()

@@ -1,0 +1,279 @@
+"""ZeroEGGS end to end on tiny synthetic data: train, resume, generate (API + CLI), blends, seeds, PCA, errors.
+
+One tiny model is trained once per module (6 steps); every other test reuses it and its compilations.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from jaxgest.errors import CheckpointError, JaxgestError
+from jaxgest.motion import bvh
+from jaxgest.motion.synthetic import write_dataset
+
+JAXGEST = [sys.executable, "-m", "jaxgest.cli"]
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    from jaxgest.zeggs.train import train
+
+    root = tmp_path_factory.mktemp("zeggs")
+    data = root / "data"
+    write_dataset(data, clips=4, seconds=4, progress=False)
+    work = root / "work"
+    summary = train(data, work, preset="tiny", steps=6, progress=False, log_every=3, ckpt_every=3)
+    return data, work, summary
+
+
+@pytest.fixture(scope="module")
+def clips(trained):
+    data, _, _ = trained
+    styles = [bvh.load(p) for p in sorted(data.glob("*.bvh"))[:2]]
+    audio = sorted(data.glob("*.wav"))[0]
+    return styles, audio
+
+
+@pytest.fixture(scope="module")
+def with_pca(trained):
+    """The trained workdir with a PCA of its style embeddings (what `jaxgest zeggs pca` fits)."""
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.zeggs.evaluate import style_windows
+    from jaxgest.zeggs.inference import load_model
+    from jaxgest.zeggs.pca import fit_pca
+
+    data, work, _ = trained
+    model = load_model(work)
+    emb = np.concatenate([style_windows(model, c, 1.0) for c in load_folder(data)])
+    fit_pca(emb).save(work / "pca.json")
+    return work
+
+
+def test_api_matches_spec():
+    from jaxgest.zeggs import api, inference
+
+    assert api.load_model is inference.load_model
+    assert set(api.count_params("tiny")) == {"speech_encoder", "style_encoder", "generator"}
+    import inspect
+
+    sig = inspect.signature(api.generate)
+    assert list(sig.parameters)[:2] == ["audio", "styles"]
+    for name, default in (("weights", None), ("seed", 0), ("temperature", 1.0)):
+        assert sig.parameters[name].kind is inspect.Parameter.KEYWORD_ONLY and sig.parameters[name].default == default
+    assert sig.parameters["workdir"].default is inspect.Parameter.empty
+
+
+def test_training_writes_everything_and_resumes(trained):
+    from jaxgest.zeggs.train import train
+
+    data, work, summary = trained
+    for name in ("config.json", "metrics.jsonl", "pose_stats.json", "speech_stats.json", "reference.bvh"):
+        assert (work / name).is_file(), name
+    lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in lines] == [3, 6] and all(np.isfinite(r["loss"]) for r in lines)
+    assert lines[0]["devices"] == 1 and summary["start_step"] == 0
+    again = train(data, work, preset="tiny", steps=8, progress=False, log_every=2, ckpt_every=2)
+    assert again["start_step"] == 6 and np.isfinite(again["final"]["loss"])
+    lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in lines][-1] == 8
+    with pytest.raises(CheckpointError, match="does not match"):
+        train(data, work, preset="tiny", steps=8, progress=False, overrides={"gru_hidden": 16})
+
+
+def test_generate_length_rig_and_seeds(trained, clips):
+    from jaxgest.zeggs.api import generate
+
+    _, work, _ = trained
+    styles, audio = clips
+    m = generate(audio, styles[0], workdir=work, seed=0)
+    info = sf.info(str(audio))
+    assert m.num_frames == round(info.frames / info.samplerate * styles[0].fps)
+    assert m.fps == styles[0].fps
+    assert m.skeleton.names == styles[0].skeleton.names and np.all(np.isfinite(m.rotations))
+    same = generate(audio, [styles[0]], workdir=work, seed=0)
+    other = generate(audio, [styles[0]], workdir=work, seed=1)
+    np.testing.assert_array_equal(m.rotations, same.rotations)
+    np.testing.assert_array_equal(m.translations, same.translations)
+    assert np.abs(m.rotations - other.rotations).max() > 1e-4
+    cold = generate(audio, [styles[0]], workdir=work, seed=1, temperature=0.0)  # the posterior mean
+    np.testing.assert_array_equal(cold.rotations, generate(audio, [styles[0]], workdir=work, seed=2,
+                                                           temperature=0.0).rotations)
+
+
+def test_padded_lengths_are_exact(trained, clips):
+    """Sequences padded to shared bucket lengths give the same result as the exact length."""
+    import jax.numpy as jnp
+
+    from jaxgest.zeggs.inference import bucket_length, load_model
+
+    _, work, _ = trained
+    styles, audio = clips
+    assert [bucket_length(n) for n in (1, 64, 65, 97, 600)] == [64, 64, 96, 128, 768]
+    model = load_model(work)
+    x = jnp.asarray(model.style_features(styles[0]))[None, :70]
+    mu, logvar = model._encode_style(model.params, x, jnp.ones((1, 70), bool))  # padded to 96
+    mu0, logvar0 = model._fns["encode_style"](model.params, x, jnp.ones((1, 70), bool))
+    np.testing.assert_allclose(mu, mu0, atol=1e-5)
+    np.testing.assert_allclose(logvar, logvar0, atol=1e-5)
+    speech, _ = model.speech(audio)
+    s = model._encode_speech(model.params, jnp.asarray(speech)[None, :70])
+    args = (mu, x[:, 0], jnp.zeros((1, 3)), jnp.asarray([[1.0, 0, 0, 0]]), jnp.asarray([[0.0, 0, 1]]),
+            model._mean, model._std)
+    padded = model._generate(model.params, s, *args)
+    exact = model._fns["generate"](model.params, s, *args)
+    for k in exact:
+        assert padded[k].shape == exact[k].shape
+        np.testing.assert_allclose(padded[k], exact[k], atol=1e-5)
+
+
+def test_generate_from_bvh_paths_and_audio_arrays(trained, clips):
+    from jaxgest.zeggs.api import generate
+
+    data, work, _ = trained
+    styles, audio = clips
+    path = sorted(data.glob("*.bvh"))[0]
+    y, sr = sf.read(str(audio), dtype="float32")
+    a = generate(audio, str(path), workdir=work, seed=3)
+    b = generate((y, sr), [path], workdir=work, seed=3)
+    np.testing.assert_allclose(a.rotations, b.rotations, atol=1e-5)
+    with pytest.raises(JaxgestError, match="no such audio file"):
+        generate(data / "missing.wav", styles[0], workdir=work)
+    with pytest.raises(JaxgestError, match="Motion or a BVH path"):
+        generate(audio, [42], workdir=work)
+
+
+def test_blend_weights(trained, clips):
+    from jaxgest.zeggs.api import generate
+    from jaxgest.zeggs.inference import load_model
+
+    _, work, _ = trained
+    styles, audio = clips
+    model = load_model(work)
+    e1, e2 = (model.style_embedding([s], seed=5) for s in styles)
+    assert np.abs(e1 - e2).max() > 1e-4  # two different clips, two different embeddings
+    np.testing.assert_array_equal(model.style_embedding(styles, weights=[1, 0], seed=5), e1)
+    half = model.style_embedding(styles, weights=[0.5, 0.5], seed=5, temperature=0.0)
+    mu1, mu2 = (model.style_embedding([s], temperature=0.0) for s in styles)
+    np.testing.assert_allclose(half, 0.5 * (mu1 + mu2), rtol=1e-5, atol=1e-6)
+    first = generate(audio, styles, workdir=work, weights=[1, 0], seed=5)
+    alone = generate(audio, styles[:1], workdir=work, seed=5)
+    np.testing.assert_array_equal(first.rotations, alone.rotations)
+    with pytest.raises(JaxgestError, match="2 weight"):
+        generate(audio, styles[:1], workdir=work, weights=[0.5, 0.5])
+    with pytest.raises(JaxgestError, match="positive sum"):
+        generate(audio, styles, workdir=work, weights=[0, 0])
+    with pytest.raises(JaxgestError, match="finite"):
+        generate(audio, styles, workdir=work, weights=[np.nan, 1])
+
+
+def test_pca_edit_changes_output_and_bad_component_is_clear(with_pca, clips):
+    from jaxgest.zeggs.api import generate
+
+    work = with_pca
+    styles, audio = clips
+    base = generate(audio, styles[0], workdir=work, seed=0)
+    zero = generate(audio, styles[0], workdir=work, seed=0, pca_edits={0: 0.0})
+    edited = generate(audio, styles[0], workdir=work, seed=0, pca_edits={0: 2.0})
+    np.testing.assert_allclose(zero.rotations, base.rotations, atol=1e-4)
+    assert np.abs(edited.rotations - base.rotations).max() > 1e-3
+    with pytest.raises(JaxgestError, match="component 42 does not exist"):
+        generate(audio, styles[0], workdir=work, pca_edits={42: 1.0})
+
+
+def test_missing_workdir_is_clear(tmp_path, clips):
+    from jaxgest.zeggs.api import generate
+
+    styles, audio = clips
+    with pytest.raises(CheckpointError, match="no ZeroEGGS model"):
+        generate(audio, styles[0], workdir=tmp_path / "none")
+
+
+def test_evaluate_reports_the_three_figures(trained, tmp_path):
+    from jaxgest.zeggs.evaluate import evaluate, markdown
+
+    data, work, _ = trained
+    rows = ["path,content,style,audio"]
+    for i, p in enumerate(sorted(data.glob("*.bvh"))):  # two labelled styles of two clips each
+        rows.append(f"{p.resolve()},c{i},{'ab'[i % 2]},{p.with_suffix('.wav').resolve()}")
+    (tmp_path / "manifest.csv").write_text("\n".join(rows) + "\n")
+    r = evaluate(work, tmp_path, max_clips=1, progress=False)
+    assert r["probe"]["chance"] == 0.5 and r["probe"]["styles"] == ["a", "b"] and 0 <= r["probe"]["accuracy"] <= 1
+    b = r["beat_alignment"]
+    assert b["clips"] == 1 and all(0 <= b[k] <= 1 for k in ("generated", "generated_shuffled", "real"))
+    f = r["frechet_distance"]
+    assert f["generated_vs_real"] > 0 and f["real_train_vs_real_test"] >= 0
+    assert "style probe accuracy (chance 0.500)" in markdown(r)
+
+
+@pytest.mark.realdata
+def test_generate_on_the_zeggs_rig_from_real_audio(trained, zeggs_dir):
+    from jaxgest.zeggs.api import generate
+
+    _, work, _ = trained
+    style = bvh.load(zeggs_dir / "067_Speech_2_x_1_0.bvh")
+    style = style.replace(rotations=style.rotations[:90], translations=style.translations[:90])
+    audio = zeggs_dir / "067_Speech_2_x_1_0.wav"
+    info = sf.info(str(audio))
+    m = generate(audio, [style], workdir=work)
+    assert m.skeleton.names == style.skeleton.names and m.fps == 30.0
+    assert m.num_frames == round(info.frames / info.samplerate * 30.0)
+    assert np.all(np.isfinite(m.rotations))
+
+
+def _run(args, cwd):
+    return subprocess.run(JAXGEST + args, capture_output=True, text=True, timeout=600, cwd=cwd)
+
+
+@pytest.mark.realdata
+def test_cli_generate_with_real_zeggs_audio(trained, zeggs_dir, tmp_path):
+    data, work, _ = trained
+    style = str(sorted(data.glob("*.bvh"))[0])
+    audio = zeggs_dir / "067_Speech_2_x_1_0.wav"
+    out = tmp_path / "real.bvh"
+    r = _run(["zeggs", "generate", "--workdir", str(work), "--audio", str(audio), "--style", style,
+              "--out", str(out)], tmp_path)
+    assert r.returncode == 0, r.stderr
+    info = sf.info(str(audio))
+    m = bvh.load(out)
+    assert m.num_frames == round(info.frames / info.samplerate * bvh.load(style).fps)
+    assert m.skeleton.names == bvh.load(style).skeleton.names
+
+
+@pytest.mark.slow
+def test_cli_generate_pca_and_errors(trained, tmp_path):
+    data, work, _ = trained
+    style = str(sorted(data.glob("*.bvh"))[0])
+    audio = str(sorted(data.glob("*.wav"))[0])
+    r = _run(["zeggs", "pca", "--workdir", str(work), "--data", str(data), "--window", "1"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "explained variance" in r.stdout and (work / "pca.json").is_file()
+    out = tmp_path / "gen.bvh"
+    r = _run(["zeggs", "generate", "--workdir", str(work), "--audio", audio, "--style", style, "--style", style,
+              "--weights", "0.5,0.5", "--pca-edit", "0=1.5", "--seed", "2", "--out", str(out)], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert bvh.load(out).num_frames > 1
+    bad = [
+        (["--weights", "1,1,1"], "weight"),
+        (["--weights", "0,0"], "positive sum"),
+        (["--pca-edit", "42=1"], "component 42 does not exist"),
+        (["--pca-edit", "zero"], "COMPONENT=DELTA"),
+    ]
+    for extra, msg in bad:
+        out2 = tmp_path / "bad.bvh"
+        styles = ["--style", style, "--style", style] if extra[1] == "0,0" else ["--style", style]
+        r = _run(["zeggs", "generate", "--workdir", str(work), "--audio", audio, *styles,
+                  "--out", str(out2)] + extra, tmp_path)
+        assert r.returncode == 2 and msg in r.stderr and "Traceback" not in r.stderr, (extra, r.stderr)
+        assert len(r.stderr.strip().splitlines()) == 1 and not out2.exists()
+    r = _run(["zeggs", "generate", "--workdir", str(tmp_path / "none"), "--audio", audio, "--style", style,
+              "--out", str(tmp_path / "x.bvh")], tmp_path)
+    assert r.returncode == 2 and "no ZeroEGGS model" in r.stderr
+    r = _run(["zeggs", "train", "--data", str(data), "--workdir", str(tmp_path / "w"), "--override", "gru=3"],
+             tmp_path)
+    assert r.returncode == 2 and "--override" in r.stderr and "Traceback" not in r.stderr, r.stderr

@@ -9,7 +9,8 @@
   make_train_step` (RAdam, dropout on, generator on its own predictions over the whole window) at the
   preset's batch (paper: 32 sequences of T = 256 frames, style clips of ``style_window_max`` = 512 frames).
   The paper step takes seconds per call on 2 cores, so ``--quick`` times the ``tiny`` preset instead; the
-  record's ``case`` and ``note`` name the preset.
+  record's ``case`` and ``note`` name the preset. Compiled with the preset's ``compiler_options`` as
+  ``jaxgest zeggs train`` does (tiny: XLA backend optimisation level 0; paper: XLA's defaults).
 
 Each call is one full step ``(state, batch, key) -> (state, metrics)`` on the same input state (no buffer
 donation, so repeated calls are independent); ``frames`` is the target window and ``per_pose_us`` the
@@ -115,9 +116,11 @@ def zeggs_train_case(preset: str, *, quick: bool) -> Case:
         return state, zeggs_batch(cfg, b, f, s), jax.random.PRNGKey(0)
 
     return Case(name=f"train_zeggs_{preset}", batch=b, frames=f,
-                impls=[Impl("jit", jax.jit(ZS.make_train_step(cfg, tx)), kind="jit")], make_args=make_args,
+                impls=[Impl("jit", jax.jit(ZS.make_train_step(cfg, tx), compiler_options=cfg.compiler_options),
+                            kind="jit")], make_args=make_args,
                 quick=quick, max_repeats_slow=2,
-                note=f"ZEGGS {preset} preset, RAdam step, batch {b} x {f} frames, style clips of {s} frames")
+                note=f"ZEGGS {preset} preset, RAdam step, batch {b} x {f} frames, style clips of {s} frames, "
+                     f"compiler options {cfg.compiler_options}")
 
 
 def cases(quick: bool) -> list:

@@ -20,10 +20,11 @@ others are equality-tested in ``tests/test_bench_harness.py`` but not timed by t
 
 Measured (jaxlib 0.10.2, AMD EPYC Zen 5, one XLA thread, process CPU time per frame, machine load ~8):
 the generator is bound by its six matrix products (a loop of those dots alone costs 95-100 % of a
-frame); the variants move the time by less than the noise (hoist / fused / unroll 2-8: -5 % .. +15 %);
-XLA CPU rewrites a bf16 x bf16 -> f32 dot of this size into an f32 dot on bf16-rounded weights (the
-converts are hoisted out of the loop), so bf16 kernels stream the same bytes at batch 1 (no gain) and
-were 10-15 % cheaper in CPU time at batch 32; accuracy cost max |diff| ~0.013 after 150-300 frames.
+frame: ~2.4 ms per frame at batch 1, ~9 ms at batch 32); no variant beats the model's own loop (batch 1:
+hoist / fused / unroll 2-8 within -2 .. +11 % of its CPU time; batch 32: 6-15 % more). At batch 1 XLA
+CPU turns a bf16 x bf16 -> f32 dot into an f32 dot on bf16-rounded weights (the converts are hoisted out
+of the loop: the same bytes are streamed, +19 % CPU time); at batch 32 it runs a native bf16 GEMM
+(YNNPACK fusion): -15 % CPU time, for an output error of ~0.9 % RMS (max |diff| ~0.013) after 300 frames.
 References: Ghorbani et al. 2023, §3.3 (the generator); jaxgest.zeggs.generator (the equations).
 """
 

@@ -50,8 +50,10 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _env(host_devices: int, **extra) -> dict:
-    keep = ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS")  # a shared XLA cache
+def _env(host_devices: int, cache: bool = True, **extra) -> dict:
+    # a persistent XLA cache the user set up is shared with the single-process workers (not with the
+    # jax.distributed ones: one process would write what the other reads while both are compiling)
+    keep = ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS") if cache else ()
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_")) or k in keep}
     env.update(XLA_FLAGS=f"--xla_force_host_platform_device_count={host_devices}", JAX_PLATFORMS="cpu",
                PYTHONPATH=str(WORKER.parents[1]), **extra)
@@ -72,20 +74,26 @@ def runs(tmp_path_factory):
         jobs[f"host{p}"] = (
             common + ["--host-local", "--out", str(root / "hosts")]
             + [a for m in HOST_MODELS for a in ("--model", m)],
-            _env(2, JAX_COORDINATOR_ADDRESS=f"localhost:{port}", JAX_NUM_PROCESSES="2",
+            _env(2, cache=False, JAX_COORDINATOR_ADDRESS=f"localhost:{port}", JAX_NUM_PROCESSES="2",
                  JAX_PROCESS_ID=str(p)),
         )
-    procs = {k: subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # Output to files, not pipes: a worker blocked on a full pipe that is not read yet would stall its
+    # jax.distributed peer (which then fails the shutdown barrier).
+    logs = {k: open(root / f"{k}.log", "w+") for k in jobs}
+    procs = {k: subprocess.Popen(cmd, env=env, stdout=logs[k], stderr=subprocess.STDOUT, text=True)
              for k, (cmd, env) in jobs.items()}
     failed = []
     for k, proc in procs.items():
         try:
-            _, err = proc.communicate(timeout=1200)  # generous: 2 shared cores, cold compilation
+            proc.wait(timeout=1200)  # generous: 2 shared cores, cold compilation
         except subprocess.TimeoutExpired:
             proc.kill()
-            _, err = proc.communicate()
+            proc.wait()
+        logs[k].seek(0)
+        log = logs[k].read()
+        logs[k].close()
         if proc.returncode != 0:
-            failed.append(f"{k}: exit {proc.returncode}\n{err[-3000:]}")
+            failed.append(f"{k}: exit {proc.returncode}\n{log[-3000:]}")
     if failed:
         pytest.fail("parallel worker failed:\n" + "\n".join(failed))
     return {"one": root / "one", "four": root / "four", "host0": root / "hosts" / "proc0",

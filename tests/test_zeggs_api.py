@@ -186,6 +186,21 @@ def test_pca_edit_changes_output_and_bad_component_is_clear(with_pca, clips):
         generate(audio, styles[0], workdir=work, pca_edits={42: 1.0})
 
 
+def test_unmapped_style_rig_error_names_the_clip(trained, clips, tmp_path):
+    from jaxgest.zeggs.api import generate
+
+    _, work, _ = trained
+    _, audio = clips
+    path = tmp_path / "odd_rig.bvh"
+    path.write_text(
+        "HIERARCHY\nROOT Base\n{\n\tOFFSET 0 0 0\n\tCHANNELS 6 Xposition Yposition Zposition Zrotation "
+        "Xrotation Yrotation\n\tJOINT Arm\n\t{\n\t\tOFFSET 0 10 0\n\t\tCHANNELS 3 Zrotation Xrotation "
+        "Yrotation\n\t\tEnd Site\n\t\t{\n\t\t\tOFFSET 0 5 0\n\t\t}\n\t}\n}\nMOTION\nFrames: 60\n"
+        "Frame Time: 0.0166667\n" + "0 0 0 0 0 0 0 0 0\n" * 60)
+    with pytest.raises(JaxgestError, match=r"^odd_rig: .*no joint map"):
+        generate(audio, path, workdir=work)
+
+
 def test_missing_workdir_is_clear(tmp_path, clips):
     from jaxgest.zeggs.api import generate
 

@@ -98,7 +98,10 @@ class ZeggsModel_:
     # -- pieces ------------------------------------------------------------------------------------------
     def style_features(self, style: Motion) -> np.ndarray:
         """Normalised pose features ``(F, P)`` of a style clip on the training rig at the model rate."""
-        m = resample_motion(to_rig(style, self.reference), self.cfg.fps)
+        try:
+            m = resample_motion(to_rig(style, self.reference), self.cfg.fps)
+        except JaxgestError as e:  # e.g. a rig that matches no joint map: name the clip
+            raise type(e)(f"{style.name or 'style clip'}: {e}") from None
         if m.num_frames < max(self.cfg.style_min_frames, int(MIN_STYLE_SECONDS * self.cfg.fps)):
             raise DataError(f"{style.name or 'style clip'}: {style.duration:.2f} s is too short for a style "
                             f"example (at least {MIN_STYLE_SECONDS} s)")

@@ -6,6 +6,7 @@ Reads, from the results folder, whichever of these exist: eval_intra.json (Table
 Table 1), eval_inter.json (Table 3), eval_ablate_<term>.json (Table 4, soft swap on intra pairs; the "full"
 row is the soft row of eval_intra.json), validity_full.json (Table 1 on the whole dataset),
 eval_identity_{intra,inter}.json (no-transfer reference rows), diagnose.json (autoencoder round trips),
+ext_ae12k_{eval_intra,diagnose}.json (the run with twice the autoencoder steps),
 timings.tsv and train_*.txt. Missing files give a note instead of a table, so partial runs still tabulate.
 Units: content errors in metres (DTW over both hands' positions), style errors in m/s (arm velocity
 statistics); see jaxgest/tgst/evaluate.py.
@@ -101,11 +102,33 @@ def diagnose_table(d):
              "ae_upper": "AE upper body, original lower body", "ae_full": "AE upper and lower body"}
     for k, label in names.items():
         lines.append(f"| {label} | {m[k]['content']:.3f} | {m[k]['style']:.3f} | {m[k]['speed']:.3f} |")
+    a = d.get("ae_angle_deg")
+    if a:
+        lines += ["", "Autoencoder mean angular reconstruction error (upper body, 60 fps): "
+                  + ", ".join(f"{k.replace('_', '-')} clips {v:.2f}°" for k, v in a.items()) + "."]
     sw = d.get("soft_swap")
     if sw:
         lines += ["", f"Soft swap sharpness ({sw['num_pairs']} intra pairs): mean largest swap weight "
                   f"{sw['max_weight']:.3f}, mean effective number of blended style tokens "
                   f"{sw['effective_tokens']:.3f} (1 = hard swap)."]
+    return "\n".join(lines)
+
+
+def extension_table(folder, intra, diag):
+    """Main run vs the extension with twice the autoencoder steps (ext_ae12k_*), intra pairs, mean errors."""
+    ext, ext_diag = _load(folder, "ext_ae12k_eval_intra.json"), _load(folder, "ext_ae12k_diagnose.json")
+    if ext is None or ext_diag is None or intra is None or diag is None:
+        return ""
+    lines = ["**Extension: 12,000 autoencoder steps instead of 6,000** (same seed; transformer retrained 10,000 "
+             "steps on it; intra pairs; mean errors).", "",
+             "| AE steps | AE angle, held-out clips (°) | AE round-trip style error (m/s) | "
+             + " | ".join(f"{LABELS[m]} content / style" for m in intra["methods"]) + " |",
+             "|---|---|---|" + "---|" * len(intra["methods"])]
+    for steps, r, d in ((6000, intra, diag), (12000, ext, ext_diag)):
+        cells = [str(steps), f"{d['ae_angle_deg']['held_out']:.2f}", f"{d['mean']['ae_full']['style']:.2f}"]
+        cells += [f"{r['methods'][m]['content']['mean']:.3f} / {r['methods'][m]['style']['mean']:.2f}"
+                  for m in intra["methods"]]
+        lines.append(_row(cells))
     return "\n".join(lines)
 
 
@@ -177,6 +200,9 @@ def main(argv) -> int:
     if diag is not None:
         parts.append(diagnose_table(diag))
     parts.append(ablation_table(folder, intra))
+    ext = extension_table(folder, intra, diag)
+    if ext:
+        parts.append(ext)
     for extra in (training(folder), timings(folder)):
         if extra:
             parts.append(extra)

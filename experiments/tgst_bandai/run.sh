@@ -3,6 +3,7 @@
 #
 #   bash experiments/tgst_bandai/run.sh                 # from anywhere; paths are relative to the repo
 #   SHARED=/path/to/shared AE_STEPS=6000 TR_STEPS=10000 bash experiments/tgst_bandai/run.sh
+#   EXT_AE_STEPS=12000 bash experiments/tgst_bandai/run.sh   # + the extension with twice the AE steps
 #
 # 1. split: training folder = every content except BYEBYE and GUIDE, evaluation folder = those two held-out
 #    contents (15 styles each); both are folders of symlinks to the shared files (nothing copied);
@@ -112,7 +113,25 @@ stage validity_full "$RES/validity_full.json" "$PYTHON" experiments/tgst_bandai/
 stage identity "$RES/eval_identity_inter.json" "$PYTHON" experiments/tgst_bandai/baseline_identity.py \
   "$EVAL_DIR" "$RES/eval_identity"
 stage diagnose "$RES/diagnose.json" "$PYTHON" experiments/tgst_bandai/diagnose.py "$MAIN" "$EVAL_DIR" \
-  "$RES/diagnose.json"
+  "$RES/diagnose.json" "$TRAIN_DIR"
+
+# ---- optional extension (EXT_AE_STEPS=12000): the autoencoder trained further from the main run's checkpoint,
+# a transformer retrained on it, intra evaluation and round trips (results ext_ae12k_*: make_tables expects 12000)
+EXT_AE_STEPS="${EXT_AE_STEPS:-}"
+if [ -n "$EXT_AE_STEPS" ]; then
+  EXT="$OUT/ext_ae${EXT_AE_STEPS%000}k"
+  EXT_RES="$RES/ext_ae${EXT_AE_STEPS%000}k"
+  if [ ! -d "$EXT/checkpoints/autoencoder" ]; then
+    mkdir -p "$EXT/checkpoints"
+    cp -r "$MAIN/checkpoints/autoencoder" "$EXT/checkpoints/"
+  fi
+  # (the later --ae-steps overrides train's own)
+  stage ext_train "$EXT/checkpoints/transformer/$TR_STEPS" train "$EXT" "ext_ae${EXT_AE_STEPS%000}k" \
+    --ae-steps "$EXT_AE_STEPS"
+  stage ext_eval_intra "${EXT_RES}_eval_intra.json" evaluate "$EXT" "${EXT_RES}_eval_intra.json" --pairs intra
+  stage ext_diagnose "${EXT_RES}_diagnose.json" "$PYTHON" experiments/tgst_bandai/diagnose.py "$EXT" "$EVAL_DIR" \
+    "${EXT_RES}_diagnose.json"
+fi
 
 # ---- 7. tables
 "$PYTHON" experiments/tgst_bandai/make_tables.py "$RES" > "$RES/tables.md"

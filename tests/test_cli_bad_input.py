@@ -155,10 +155,7 @@ def test_bad_bvh_as_tgst_content(ctx, capsys, case, name, expected):
     ("truncated", "truncated.bvh", ["truncated.bvh", "180"]),
     ("nan", "nan.bvh", ["nan.bvh:", "motion row contains NaN or inf"]),
     ("too_short", "short.bvh", ["short", "is too short for a style example"]),
-    pytest.param("unmapped", "unmapped.bvh", ["unmapped", "matches no joint map"], marks=pytest.mark.xfail(
-        strict=True, reason="jaxgest/zeggs (not owned here): the joint-map error of a style clip does not "
-        "name "
-        "the file ('skeleton with joints Base, Arm, ... matches no joint map ...')")),
+    ("unmapped", "unmapped.bvh", ["unmapped", "matches no joint map"]),
 ])
 def test_bad_bvh_as_zeggs_style(ctx, capsys, case, name, expected):
     out = _out(ctx)

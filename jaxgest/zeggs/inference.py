@@ -47,9 +47,9 @@ def validate_weights(weights, count: int) -> np.ndarray:
     if w.ndim != 1 or len(w) != count:
         raise JaxgestError(f"blend weights: got {w.size} weight(s) for {count} style clip(s)")
     if not np.all(np.isfinite(w)):
-        raise JaxgestError(f"blend weights must be finite, got {list(w)}")
+        raise JaxgestError(f"blend weights must be finite, got {w.tolist()}")
     if w.sum() <= 0:
-        raise JaxgestError(f"blend weights must have a positive sum, got {list(w)}")
+        raise JaxgestError(f"blend weights must have a positive sum, got {w.tolist()}")
     return w
 
 

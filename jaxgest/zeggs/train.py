@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgest import parallel
-from jaxgest.errors import CheckpointError, DataError
+from jaxgest.errors import CheckpointError, DataError, JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
 from jaxgest.training import Checkpointer, MetricsLogger, TrainState, train_loop, write_json_atomic
@@ -73,6 +73,10 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
 
     mesh = parallel.make_mesh(devices)
     info = parallel.device_info(mesh)
+    if cfg.batch_size % mesh.size:  # before any file of the workdir is written
+        ok = [n for n in range(1, cfg.batch_size + 1) if cfg.batch_size % n == 0]
+        raise JaxgestError(f"zeggs batch size {cfg.batch_size} does not divide over {mesh.size} devices; use "
+                           f"--devices with one of {', '.join(map(str, ok))}")
     meta_config = {"preset": preset, **cfg.to_dict()}
     ckpt = Checkpointer(workdir, kind=KIND, config=meta_config, skeleton=skeleton.signature(), subdir=CKPT_SUBDIR,
                         ignore=IGNORED)
@@ -147,7 +151,7 @@ def load_workdir(workdir):
                               "`jaxgest zeggs train --data DIR --workdir W`)")
     meta = json.loads(cfg_path.read_text())
     if meta.get("model") != KIND:
-        raise CheckpointError(f"{workdir}: holds a {meta.get('model', 'unknown')!r} model, not a ZeroEGGS model")
+        raise CheckpointError(f"{workdir}: holds a {meta.get('model', meta.get('kind', 'unknown'))!r} model, not a ZeroEGGS model")
     cfg = config_from_dict(meta["config"])
     ckpt = Checkpointer(workdir, kind=KIND, config={"preset": meta["preset"], **cfg.to_dict()},
                         skeleton=meta["skeleton"], subdir=CKPT_SUBDIR, read_only=True, ignore=IGNORED)

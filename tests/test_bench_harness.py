@@ -201,9 +201,15 @@ def test_python_m_benchmarks_writes_valid_json_and_table(tmp_path):
 
 
 def test_no_matching_case_is_a_one_line_error(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "jaxgest.cli", "bench", "--cases", "no_such_case"], cwd=tmp_path,
+    # from the clone's root, as the README says (a non-editable install has no benchmarks/ on its path)
+    r = subprocess.run([sys.executable, "-m", "jaxgest.cli", "bench", "--cases", "no_such_case"], cwd=REPO,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and r.stderr.strip() == "jaxgest: no benchmark case matches 'no_such_case'"
+    # outside a clone: one line saying where to run it
+    r = subprocess.run([sys.executable, "-m", "jaxgest.cli", "bench", "--cases", "no_such_case"], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=60,
+                       env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and r.stderr.startswith("jaxgest: ")
 
 
 def test_numpy_reference_matches_the_jax_transfer():

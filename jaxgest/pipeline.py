@@ -20,11 +20,10 @@ import pathlib
 import time
 from typing import Optional
 
-import numpy as np
 
 from jaxgest.errors import DataError
 from jaxgest.motion import body, kinematics
-from jaxgest.motion.datasets import resample_motion
+from jaxgest.motion.datasets import fit_frames, resample_motion
 from jaxgest.motion.skeleton import Motion
 
 
@@ -36,9 +35,7 @@ def to_rig(motion: Motion, template: Motion, frames: Optional[int] = None) -> Mo
         motion = kinematics.floor_contact(moved).replace(name=motion.name)
     motion = resample_motion(motion, template.fps)
     if frames is not None and frames != motion.num_frames:
-        last = min(frames, motion.num_frames)
-        idx = np.minimum(np.arange(frames), last - 1)  # cut, or hold the last frame (at most a frame or two)
-        motion = motion.replace(rotations=motion.rotations[idx], translations=motion.translations[idx])
+        motion = fit_frames(motion, frames)  # at most a frame or two of rounding
     return motion
 
 

@@ -137,3 +137,14 @@ def test_dataset_repository_root_uses_its_data_folder(bandai_dir, tmp_path):
     assert len(clips) == 2 and clips[0].content == "bow"
     with pytest.raises(DataError, match="no .bvh files"):
         ds.load_folder(tmp_path / "bandai-namco-1" / "..")  # a folder with neither clips nor data/
+
+
+def test_fit_frames_cuts_or_holds_the_last_frame(motion):
+    cut = ds.fit_frames(motion, 5)
+    np.testing.assert_array_equal(cut.rotations, motion.rotations[:5])
+    longer = ds.fit_frames(motion, motion.num_frames + 3)
+    assert longer.num_frames == motion.num_frames + 3
+    np.testing.assert_array_equal(longer.translations[-3:], np.repeat(motion.translations[-1:], 3, 0))
+    i0, i1, w = ds.resample_weights(4, 30.0, 60.0, 7)
+    np.testing.assert_array_equal(i0, [0, 0, 1, 1, 2, 2, 3])
+    np.testing.assert_allclose(w, [0, 0.5, 0, 0.5, 0, 0.5, 0])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 
+import jax
 import numpy as np
 import pytest
 
@@ -175,3 +176,19 @@ def test_cli_errors_are_one_line(trained, tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert err.startswith("jaxgest: ") and "\n" not in err and "Traceback" not in err
     assert not (tmp_path / "o.bvh").exists()
+
+
+def test_load_model_is_cached_until_the_workdir_is_retrained(trained, tmp_path):
+    from jaxgest.tgst.api import load_model
+    from jaxgest.tgst.train import train
+
+    data, work, _ = trained
+    copy = tmp_path / "w"
+    shutil.copytree(work, copy)
+    first = load_model(copy)
+    assert load_model(copy) is first  # no second checkpoint restore
+    train(data, copy, preset="tiny", ae_steps=4, transformer_steps=6, progress=False, log_every=2, ckpt_every=2)
+    again = load_model(copy)  # config.json rewritten by training: reloaded
+    assert again is not first
+    flat = lambda m: np.concatenate([np.ravel(x) for x in jax.tree_util.tree_leaves(m.params["transformer"])])
+    assert not np.allclose(flat(again), flat(first))

@@ -346,6 +346,24 @@ class NormStats:
             raise CheckpointError(f"{path}: unreadable normalisation stats ({e})") from None
 
 
+def resample_weights(num_frames: int, src_fps: float, dst_fps: float, frames: int):
+    """Interpolation of ``frames`` frames at ``k / dst_fps`` from ``num_frames`` frames at ``src_fps``.
+
+    Returns ``(i0, i1, w)``: the two source frames around each new frame time and the weight of ``i1``
+    (times past the last source frame hold it).
+    """
+    pos = np.arange(frames) * (float(src_fps) / float(dst_fps))
+    i0 = np.minimum(np.floor(pos).astype(int), num_frames - 1)
+    i1 = np.minimum(i0 + 1, num_frames - 1)
+    return i0, i1, np.clip(pos - i0, 0.0, 1.0)
+
+
+def fit_frames(motion: Motion, frames: int) -> Motion:
+    """Cut ``motion`` to ``frames`` frames, or pad it by holding its last frame."""
+    idx = np.minimum(np.arange(int(frames)), motion.num_frames - 1)
+    return motion.replace(rotations=motion.rotations[idx], translations=motion.translations[idx])
+
+
 def resample_motion(motion: Motion, fps: float) -> Motion:
     """``motion`` at ``fps``: slerp of rotations and lerp of translations at the new frame times.
 
@@ -358,10 +376,7 @@ def resample_motion(motion: Motion, fps: float) -> Motion:
         return motion
     F = motion.num_frames
     n = int(np.floor((F - 1) * fps / motion.fps + 1e-9)) + 1
-    pos = np.arange(n) * (motion.fps / fps)
-    i0 = np.minimum(np.floor(pos).astype(int), F - 1)
-    i1 = np.minimum(i0 + 1, F - 1)
-    w = pos - i0
+    i0, i1, w = resample_weights(F, motion.fps, fps, n)
     q = rot.quat_slerp(motion.rotations[i0], motion.rotations[i1], np.broadcast_to(w[:, None], (n, motion.rotations.shape[1])))
     tr = motion.translations[i0] * (1 - w)[:, None, None] + motion.translations[i1] * w[:, None, None]
     return motion.replace(rotations=q, translations=tr, fps=fps)

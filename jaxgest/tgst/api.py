@@ -69,10 +69,7 @@ def resample_body(x: np.ndarray, src_fps: float, dst_fps: float, frames: int) ->
     """Body exp-maps ``(F, 3J)`` at ``src_fps`` -> ``(frames, 3J)`` at the times ``k / dst_fps`` (slerp)."""
     F = x.shape[0]
     q = R.expmap_to_quat(np.asarray(x, np.float64).reshape(F, -1, 3))
-    pos = np.arange(frames) * (src_fps / dst_fps)
-    i0 = np.minimum(np.floor(pos).astype(int), F - 1)
-    i1 = np.minimum(i0 + 1, F - 1)
-    w = np.clip(pos - i0, 0.0, 1.0)
+    i0, i1, w = datasets.resample_weights(F, src_fps, dst_fps, frames)
     out = R.quat_slerp(q[i0], q[i1], np.broadcast_to(w[:, None], (frames, q.shape[1])))
     return np.asarray(R.quat_to_expmap(out)).reshape(frames, -1)
 
@@ -130,15 +127,24 @@ class TGSTModel:
 def load_model(workdir) -> TGSTModel:
     """Load the latest autoencoder and transformer checkpoints of a ``jaxgest tgst train`` workdir.
 
-    Raises CheckpointError when the workdir has no config.json or no checkpoint of either stage, or when the
+    Cached per workdir and config.json time (training rewrites it), so the CLI, the pipeline and repeated
+    :func:`transfer` calls restore each checkpoint once. Raises CheckpointError when the workdir has no config.json or no checkpoint of either stage, or when the
     checkpoints do not match its config.
     """
-    from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
-
     workdir = pathlib.Path(workdir)
     cfg_path = workdir / "config.json"
     if not cfg_path.is_file():
         raise CheckpointError(f"{workdir}: not a TGST workdir (no config.json; run 'jaxgest tgst train' first)")
+    return _load_cached(str(workdir.resolve()), cfg_path.stat().st_mtime_ns, str(workdir))
+
+
+@functools.lru_cache(maxsize=4)
+def _load_cached(resolved: str, mtime_ns: int, given: str) -> TGSTModel:
+    """:func:`load_model` keyed by the resolved path and config time (``given`` names it in errors)."""
+    from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
+
+    workdir = pathlib.Path(given)
+    cfg_path = workdir / "config.json"
     try:
         stored = json.loads(cfg_path.read_text())
         # ZeroEGGS workdirs name their model under "model"; check the kind before reading a TGST config
@@ -159,18 +165,10 @@ def load_model(workdir) -> TGSTModel:
     return TGSTModel(cfg, {"autoencoder": ae, "transformer": tr}, workdir)
 
 
-@functools.lru_cache(maxsize=4)
-def _cached_model(workdir: str, mtime: float) -> TGSTModel:
-    return load_model(workdir)
-
-
 def transfer(content: Motion, style: Motion, *, workdir, method: str = "soft") -> Motion:
     """Style transfer of two Motions with the model of ``workdir`` (SPEC §7); see :class:`TGSTModel`."""
     _check_method(method)
-    path = pathlib.Path(workdir)
-    cfg = path / "config.json"
-    mtime = cfg.stat().st_mtime if cfg.is_file() else 0.0
-    return _cached_model(str(path.resolve()), mtime).transfer(content, style, method=method)
+    return load_model(workdir).transfer(content, style, method=method)
 
 
 __all__ = ["METHODS", "TGSTModel", "compiled_transfer", "count_params", "load_model", "resample_body", "transfer"]

@@ -30,7 +30,7 @@ import numpy as np
 
 from jaxgest.errors import DataError, JaxgestError
 from jaxgest.motion import body as B
-from jaxgest.motion.datasets import resample_motion
+from jaxgest.motion.datasets import fit_frames, resample_motion
 from jaxgest.motion.skeleton import Motion
 from jaxgest.zeggs import features as Fe
 from jaxgest.zeggs.steps import ZeggsModel
@@ -180,7 +180,7 @@ class ZeggsModel_:
             motion = B.retarget_from_body(body, tmpl).replace(name=name)
         out_frames = max(1, int(round(duration * target.fps)))
         motion = resample_motion(motion, target.fps)
-        return _fit_frames(motion, out_frames)
+        return fit_frames(motion, out_frames)
 
 
 def bucket_length(n: int, smallest: int = 64) -> int:
@@ -205,17 +205,6 @@ def _jitted(cfg) -> dict:
         "generate": jax.jit(lambda p, s, e, y0, r0, q0, f, mean, std: model.apply(
             {"params": p}, s, e, y0, r0, q0, f, mean, std, method=ZeggsModel.generate), compiler_options=opts),
     }
-
-
-def _fit_frames(motion: Motion, frames: int) -> Motion:
-    """Cut or pad (repeat the last frame) to exactly ``frames`` frames."""
-    F = motion.num_frames
-    if F >= frames:
-        return motion.replace(rotations=motion.rotations[:frames], translations=motion.translations[:frames])
-    pad = frames - F
-    return motion.replace(rotations=np.concatenate([motion.rotations, np.repeat(motion.rotations[-1:], pad, 0)]),
-                          translations=np.concatenate([motion.translations,
-                                                       np.repeat(motion.translations[-1:], pad, 0)]))
 
 
 @functools.lru_cache(maxsize=4)

@@ -128,8 +128,8 @@ def load_model(workdir) -> TGSTModel:
     """Load the latest autoencoder and transformer checkpoints of a ``jaxgest tgst train`` workdir.
 
     Cached per workdir and config.json time (training rewrites it), so the CLI, the pipeline and repeated
-    :func:`transfer` calls restore each checkpoint once. Raises CheckpointError when the workdir has no config.json or no checkpoint of either stage, or when the
-    checkpoints do not match its config.
+    :func:`transfer` calls restore each checkpoint once. Raises CheckpointError when the workdir has no
+    config.json or no checkpoint of either stage, or when the checkpoints do not match its config.
     """
     workdir = pathlib.Path(workdir)
     cfg_path = workdir / "config.json"

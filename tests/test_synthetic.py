@@ -170,6 +170,48 @@ def test_stroke_apexes_on_audio_onsets():
     assert mean_dist(apex) < 0.05  # within 50 ms
 
 
+def test_hand_stops_only_at_stop_keys():
+    from jaxgest.motion.synthetic.strokes import interpolate_hand_keys, interpolate_keys
+
+    t = np.linspace(0.0, 2.0, 2001)
+    times, values = [0.0, 1.0, 2.0], np.array([[0.0], [1.0], [3.0]])
+    via = interpolate_keys(times, values, t, stops=[True, False, True])[:, 0]
+    every = interpolate_keys(times, values, t)[:, 0]
+    v_via, v_every = np.gradient(via, t), np.gradient(every, t)
+    mid = 1000  # t = 1: a via key is passed through, a stop key is a full stop
+    assert abs(v_every[mid]) < 1e-3 and v_via[mid] > 1.0
+    assert abs(v_via[0]) < 1e-3 and abs(v_via[-1]) < 1e-3
+    assert np.all(v_via[1:-1] > 0)  # one movement: no interior speed minimum at zero
+    np.testing.assert_allclose(via[[0, -1]], [0.0, 3.0])
+    # the hand version follows the same timing along an arc and keeps the keys' end points
+    hand = interpolate_hand_keys(times, np.array([[20.0, 0, 0], [0, 20.0, 0], [-20.0, 0, 0]]), t,
+                                 stops=[True, False, True])
+    np.testing.assert_allclose(np.linalg.norm(hand, axis=-1), 20.0, atol=1e-9)
+    assert np.linalg.norm(np.gradient(hand, t, axis=0)[mid]) > 1.0
+
+
+def test_kinematic_beats_of_clean_motion_align_with_speech_onsets(fk):
+    """The data property the ZeroEGGS beat-alignment criterion relies on: in every style, the speed minima
+    of the captured (clean) motion sit on speech onsets more than on shifted onsets (BeatAlign > control)."""
+    pytest.importorskip("librosa")
+    from jaxgest import metrics
+
+    aligned, control = [], []
+    for content in ("argument", "directions", "story"):
+        spec = CONTENTS[content].with_seed(0, 10.0)
+        for style in STYLES:
+            m, audio, sr = render_clip(spec, style, seed=0)
+            hl, hr = _hands(m, fk)
+            speed = metrics.hand_speed(np.stack([hl, hr], 1), FPS, [0, 1])
+            beats = metrics.kinematic_beats(speed, FPS)
+            onsets = metrics.onset_times(audio, sr)
+            aligned.append(metrics.beat_alignment(beats, onsets))
+            control.append(metrics.shuffled_beat_alignment(beats, onsets, spec.seconds, seed=0))
+    aligned, control = np.array(aligned), np.array(control)
+    assert aligned.mean() > control.mean() + 0.08, (aligned.mean(), control.mean())
+    assert np.mean(aligned > control) >= 0.8, np.round(aligned - control, 3)
+
+
 def test_custom_spec_and_style_validation():
     with pytest.raises(ValueError):
         StyleParams("x", handedness="both")

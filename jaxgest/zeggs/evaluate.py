@@ -4,10 +4,12 @@ Fréchet distance between motion-feature statistics of generated and real clips 
 * **Probe**: style embeddings (posterior means) of non-overlapping windows of every clip; clips are split
   per style into train and test halves (whole clips held out), a closed-form ridge classifier is fit on the
   train windows and scored on the test windows. Chance = 1 / number of styles.
-* **Beat alignment**: for each test clip with audio, gestures are generated from its audio in the style of
-  the clip itself (zero-shot: the clip is not used as the target, only as the style example); kinematic
+* **Beat alignment**: for each test clip with audio, gestures are generated from its audio in its style,
+  with another recording of that style (a training-half clip of another content when there is one, see
+  :func:`style_example`) as the zero-shot style example, so the example's timing cannot leak; kinematic
   beats (minima of smoothed hand speed) are scored against the audio's onsets (BeatAlign, sigma 0.1 s) and
-  against circularly shifted onsets (the shuffled control). Also reported for the real motion.
+  against circularly shifted onsets (the shuffled control), with the per-clip paired difference (mean,
+  standard error over clips, clips above the control). Also reported for the real motion.
 * **Fréchet distance** between Gaussian fits of per-frame motion features (root-frame joint positions and
   velocities) of the generated clips and of the real clips; the same distance between the real training
   clips and the real test clips is reported as the floor to compare with.
@@ -102,6 +104,25 @@ def beat_scores(motion, audio, sr: int, *, seed: int = 0) -> dict:
             "shuffled": metrics.shuffled_beat_alignment(beats, onsets, duration, seed=seed)}
 
 
+def style_example(clip, others):
+    """The style example for generating ``clip``: another recording of its style (the first of ``others``
+    with the same style and another content when there is one, else another file), else the clip itself."""
+    same = [o for o in others if o.style == clip.style and o.path != clip.path]
+    other_content = [o for o in same if o.content != clip.content]
+    return (other_content or same or [clip])[0]
+
+
+def paired_difference(scores) -> dict:
+    """Per-clip BeatAlign minus its shuffled control: mean, standard error of the mean, clips above.
+
+    scores: list of :func:`beat_scores` dicts (one per clip). The clips are the independent units, so the
+    standard error is std(diff, ddof=1) / sqrt(clips) (0 for one clip).
+    """
+    d = np.array([s["aligned"] - s["shuffled"] for s in scores], np.float64)
+    se = float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
+    return {"mean": float(d.mean()), "standard_error": se, "clips_above": int(np.sum(d > 0)), "clips": len(d)}
+
+
 def motion_statistics_features(motion) -> np.ndarray:
     """Per-frame features for the Fréchet distance: root-frame joint positions and velocities (F, 6J)."""
     f = Fe.extract_features(motion)["features"].astype(np.float64)
@@ -125,7 +146,7 @@ def evaluate(workdir, data_dir, *, seed: int = 0, max_clips: Optional[int] = Non
     gen_scores, real_scores, gen_feats, real_feats = [], [], [], []
     for c in tqdm(test, desc="zeggs evaluate", disable=not progress, leave=False):
         audio, sr = load_clip_audio(c)
-        gen = model.generate(audio, [c.motion], sr=sr, seed=seed, name=f"{c.path.stem}_gen")
+        gen = model.generate(audio, [style_example(c, train).motion], sr=sr, seed=seed, name=f"{c.path.stem}_gen")
         try:
             gen_scores.append(beat_scores(gen, audio, sr, seed=seed))
             real_scores.append(beat_scores(c.motion, audio, sr, seed=seed))
@@ -142,6 +163,7 @@ def evaluate(workdir, data_dir, *, seed: int = 0, max_clips: Optional[int] = Non
     result["beat_alignment"] = {
         "generated": mean(gen_scores, "aligned"), "generated_shuffled": mean(gen_scores, "shuffled"),
         "real": mean(real_scores, "aligned"), "real_shuffled": mean(real_scores, "shuffled"),
+        "generated_vs_control": paired_difference(gen_scores), "real_vs_control": paired_difference(real_scores),
         "clips": len(gen_scores), "sigma_s": 0.1,
     }
     real_test = np.concatenate(real_feats)
@@ -155,14 +177,22 @@ def evaluate(workdir, data_dir, *, seed: int = 0, max_clips: Optional[int] = Non
     return result
 
 
+def _diff(d) -> str:
+    if not d:
+        return ""
+    return f" (difference {d['mean']:+.3f} ± {d['standard_error']:.3f} SE, {d['clips_above']}/{d['clips']} clips above)"
+
+
 def markdown(result: dict) -> str:
     p, b, f = result["probe"], result["beat_alignment"], result["frechet_distance"]
     return "\n".join([
         "| metric | value |",
         "|---|---:|",
         f"| style probe accuracy (chance {p['chance']:.3f}) | {p['accuracy']:.3f} |",
-        f"| BeatAlign generated / shuffled control | {b['generated']:.3f} / {b['generated_shuffled']:.3f} |",
-        f"| BeatAlign real motion / shuffled control | {b['real']:.3f} / {b['real_shuffled']:.3f} |",
+        f"| BeatAlign generated / shuffled control | {b['generated']:.3f} / {b['generated_shuffled']:.3f}"
+        f"{_diff(b.get('generated_vs_control'))} |",
+        f"| BeatAlign real motion / shuffled control | {b['real']:.3f} / {b['real_shuffled']:.3f}"
+        f"{_diff(b.get('real_vs_control'))} |",
         f"| Fréchet distance generated vs real | {f['generated_vs_real']:.4g} |",
     ] + ([f"| Fréchet distance real (train clips) vs real (test clips) | {f['real_train_vs_real_test']:.4g} |"]
          if f.get("real_train_vs_real_test") is not None else []))

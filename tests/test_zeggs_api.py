@@ -221,9 +221,22 @@ def test_evaluate_reports_the_three_figures(trained, tmp_path):
     assert r["probe"]["chance"] == 0.5 and r["probe"]["styles"] == ["a", "b"] and 0 <= r["probe"]["accuracy"] <= 1
     b = r["beat_alignment"]
     assert b["clips"] == 1 and all(0 <= b[k] <= 1 for k in ("generated", "generated_shuffled", "real"))
+    d = b["generated_vs_control"]
+    assert d["clips"] == 1 and d["standard_error"] == 0.0 and d["clips_above"] == int(d["mean"] > 0)
+    assert d["mean"] == pytest.approx(b["generated"] - b["generated_shuffled"], abs=1e-12)
+    assert "clips above)" in markdown(r)
     f = r["frechet_distance"]
     assert f["generated_vs_real"] > 0 and f["real_train_vs_real_test"] >= 0
     assert "style probe accuracy (chance 0.500)" in markdown(r)
+
+
+def test_paired_difference_of_beat_scores():
+    from jaxgest.zeggs.evaluate import paired_difference
+
+    scores = [{"aligned": 0.7, "shuffled": 0.5}, {"aligned": 0.6, "shuffled": 0.6}, {"aligned": 0.4, "shuffled": 0.5}]
+    d = paired_difference(scores)  # differences 0.2, 0.0, -0.1: mean 1/30, sample std sqrt(0.07/3)
+    assert d["clips"] == 3 and d["clips_above"] == 1
+    assert d["mean"] == pytest.approx(1 / 30) and d["standard_error"] == pytest.approx(np.sqrt(0.07 / 3) / np.sqrt(3))
 
 
 @pytest.mark.realdata
@@ -292,3 +305,15 @@ def test_cli_generate_pca_and_errors(trained, tmp_path):
     r = _run(["zeggs", "train", "--data", str(data), "--workdir", str(tmp_path / "w"), "--override", "gru=3"],
              tmp_path)
     assert r.returncode == 2 and "--override" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_train_cli_on_a_finished_workdir_says_nothing_to_do(trained, capsys):
+    from jaxgest.cli import main
+
+    data, work, summary = trained
+    before = (work / "metrics.jsonl").read_text()
+    assert main(["zeggs", "train", "--data", str(data), "--workdir", str(work), "--preset", "tiny",
+                 "--steps", str(summary["steps"])]) == 0
+    out = capsys.readouterr().out
+    assert "is already trained to step" in out and "nothing to do" in out and "nan" not in out
+    assert (work / "metrics.jsonl").read_text() == before

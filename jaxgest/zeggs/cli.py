@@ -57,6 +57,10 @@ def _train(args) -> int:
     r = train(args.data, args.workdir, preset=args.preset, steps=args.steps, seed=args.seed, devices=args.devices,
               overrides=parse_overrides(args.override))
     final = r["final"]
+    if r["start_step"] >= r["steps"]:
+        print(f"zeggs: {args.workdir} is already trained to step {r['start_step']} (>= --steps {r['steps']}); "
+              "nothing to do (raise --steps to continue)")
+        return 0
     print(f"zeggs: trained {r['steps']} steps (resumed from {r['start_step']}) on {r['devices']} device(s) in "
           f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}; workdir {args.workdir}")
     return 0

@@ -37,6 +37,11 @@ s=$(t); "${J[@]}" zeggs train --data "$OUT/data" --workdir "$OUT/work" --preset 
 s=$(t); "${J[@]}" zeggs evaluate --workdir "$OUT/work" --data "$OUT/data" --json "$OUT/eval.json" --seed $SEED \
     | tee "$OUT/eval.md"; WALL[evaluate]=$(( $(t) - s ))
 
+# 3b. the same evaluation on held-out scripts: new speech and stroke timings (synth --seed 1) the model never saw
+s=$(t); "${J[@]}" synth --out "$OUT/data_heldout" --seed 1 > /dev/null
+"${J[@]}" zeggs evaluate --workdir "$OUT/work" --data "$OUT/data_heldout" --json "$OUT/eval_heldout.json" --seed $SEED \
+    | tee "$OUT/eval_heldout.md"; WALL[evaluate_heldout]=$(( $(t) - s ))
+
 # 4. blend sweep between two styles (style examples of another content than the speech: zero-shot)
 s=$(t)
 AUDIO="$OUT/data/greeting_neutral_0.wav"
@@ -101,7 +106,8 @@ res = {"seed": 0, "steps": steps, "overfit_steps": osteps, "wall_s_this_invocati
                   "speech_embedding", "style_hidden", "style_embedding", "batch_size", "window", "fps")},
        "final_train_metrics": {k: last[k] for k in ("step", "loss", "recon", "kl", "steps_per_s")},
        "first_logged_train_metrics": {k: lines[0][k] for k in ("step", "loss", "recon", "kl")},
-       "evaluate": json.loads((out / "eval.json").read_text())}
+       "evaluate": json.loads((out / "eval.json").read_text()),
+       "evaluate_heldout_scripts": json.loads((out / "eval_heldout.json").read_text())}
 res["controls_and_outputs"] = json.loads((out / "extra.json").read_text())
 if (out / "overfit.json").is_file():
     res["overfit_real_zeggs"] = json.loads((out / "overfit.json").read_text())

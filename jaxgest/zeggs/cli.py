@@ -58,8 +58,11 @@ def _train(args) -> int:
               overrides=parse_overrides(args.override))
     final = r["final"]
     if r["start_step"] >= r["steps"]:
-        print(f"zeggs: {args.workdir} is already trained to step {r['start_step']} (>= --steps {r['steps']}); "
-              "nothing to do (raise --steps to continue)")
+        if r["start_step"] == 0:
+            print(f"zeggs: data checked and {args.workdir} prepared; no steps requested (--steps 0)")
+        else:
+            print(f"zeggs: {args.workdir} is already trained to step {r['start_step']} (>= --steps {r['steps']}); "
+                  "nothing to do (raise --steps to continue)")
         return 0
     print(f"zeggs: trained {r['steps']} steps (resumed from {r['start_step']}) on {r['devices']} device(s) in "
           f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}; workdir {args.workdir}")

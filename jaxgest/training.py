@@ -208,6 +208,9 @@ class Checkpointer:
         return jax.tree_util.tree_map(lambda t, x: np.asarray(x).astype(t.dtype), params_template, params)
 
     def close(self) -> None:
+        # orbax starts a thread at construction that removes unfinished temporary checkpoints of earlier runs;
+        # wait for it too, or a process that exits right away (nothing to train) logs a RuntimeError from it.
+        getattr(self.manager, "_maybe_await_cleanup_tmp_directory", lambda: None)()
         self.manager.wait_until_finished()
         self.manager.close()
 
@@ -289,6 +292,9 @@ def train_loop(
     """
     from tqdm.auto import tqdm
 
+    for name, value in (("log_every", log_every), ("ckpt_every", ckpt_every)):
+        if not (isinstance(value, (int, np.integer)) and value >= 1):
+            raise TrainingError(f"{name} must be a positive number of steps, got {value!r}")
     start = int(jax.device_get(state.step))
     if start >= num_steps:
         return state

@@ -215,6 +215,27 @@ def test_training_audio_within_the_length_tolerance_trains(ctx, capsys, tmp_path
     assert rc == 0 and "data checked" in stdout and "no steps requested" in stdout
 
 
+def test_training_without_data_uses_the_builtin_synthetic_data(capsys, tmp_path):
+    work = tmp_path / "w"
+    rc, stdout = run_cli(["zeggs", "train", "--workdir", work, "--steps", "0"], capsys)
+    assert rc == 0 and f"built-in synthetic data in {work / 'synthetic-data'}" in stdout
+    assert len(list((work / "synthetic-data").glob("*.bvh"))) == 42 and (work / "synthetic-data/manifest.csv").is_file()
+    rc, stdout = run_cli(["zeggs", "train", "--workdir", work, "--steps", "0"], capsys)  # reused, not rewritten
+    assert rc == 0 and "no steps requested" in stdout
+
+
+@pytest.mark.parametrize("flag", ["--ckpt-every", "--log-every"])
+def test_training_with_a_non_positive_interval(ctx, capsys, tmp_path, flag):
+    rc, msg = run_cli(["zeggs", "train", "--data", ctx["data"], "--workdir", tmp_path / "w", "--steps", "1",
+                       flag, "0"], capsys)
+    assert rc == 2 and f"{flag[2:].replace('-', '_')} must be a positive number of steps, got 0" in msg, msg
+
+
+def test_training_with_negative_steps(ctx, capsys, tmp_path):
+    rc, msg = run_cli(["zeggs", "train", "--data", ctx["data"], "--workdir", tmp_path / "w", "--steps", "-3"], capsys)
+    assert rc == 2 and "steps must be >= 0, got -3" in msg, msg
+
+
 def test_training_audio_beyond_the_length_tolerance(ctx, capsys, tmp_path):
     folder = _folder_with_short_audio(ctx, tmp_path, 1.5)
     work = tmp_path / "w"

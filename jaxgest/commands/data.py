@@ -27,6 +27,20 @@ def register(subparsers) -> None:
     r.set_defaults(func=_render)
 
 
+def training_data(data, workdir) -> pathlib.Path:
+    """The ``--data`` folder of a ``train`` command; without one, the built-in synthetic dataset, written once
+    to ``<workdir>/synthetic-data`` (reused on resume)."""
+    if data is not None:
+        return pathlib.Path(data)
+    from jaxgest.motion.synthetic import write_dataset
+
+    folder = pathlib.Path(workdir) / "synthetic-data"
+    if not (folder / "manifest.csv").is_file():
+        write_dataset(folder)
+    print(f"jaxgest: no --data given: training on the built-in synthetic data in {folder}")
+    return folder
+
+
 def _synth(args) -> int:
     from jaxgest.motion.synthetic import write_dataset
 

@@ -14,7 +14,8 @@ def register(subparsers) -> None:
     p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
 
     t = sub.add_parser("train", help="train (or resume) the autoencoder, then the style transformer")
-    t.add_argument("--data", required=True, help="folder: Bandai-Namco files, ZEGGS layout or manifest.csv")
+    t.add_argument("--data", default=None, help="folder: Bandai-Namco files, ZEGGS layout or manifest.csv "
+                   "(default: the built-in synthetic data, written to W/synthetic-data)")
     t.add_argument("--workdir", required=True, help="run folder (config.json, checkpoints, metrics.jsonl)")
     t.add_argument("--preset", default="tiny", choices=("tiny", "paper"))
     t.add_argument("--steps", type=int, default=None,
@@ -44,13 +45,14 @@ def register(subparsers) -> None:
 
 
 def _train(args) -> int:
+    from jaxgest.commands.data import training_data
     from jaxgest.tgst.train import format_summary, train
 
     ae = args.ae_steps if args.ae_steps is not None else args.steps
     tr = args.transformer_steps if args.transformer_steps is not None else args.steps
     ablate = tuple(a.strip() for a in args.ablate.split(",") if a.strip()) if args.ablate else ()
-    summary = train(args.data, args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr,
-                    seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
+    summary = train(training_data(args.data, args.workdir), args.workdir, preset=args.preset, ae_steps=ae,
+                    transformer_steps=tr, seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
                     ablate=ablate)
     print(format_summary(summary))
     return 0

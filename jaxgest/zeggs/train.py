@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgest import parallel
-from jaxgest.errors import CheckpointError, DataError, JaxgestError
+from jaxgest.errors import CheckpointError, DataError, JaxgestError, TrainingError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
 from jaxgest.training import Checkpointer, MetricsLogger, TrainState, train_loop, write_json_atomic
@@ -51,6 +51,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
           ckpt_every: Optional[int] = None, overrides: Optional[dict] = None) -> dict:
     """Train (or resume) ZeroEGGS; returns a summary dict (final metrics, wall time, steps/s)."""
     parallel.maybe_initialize_distributed()
+    if steps is not None and int(steps) < 0:
+        raise TrainingError(f"steps must be >= 0, got {steps}")
     t0 = time.perf_counter()
     workdir = pathlib.Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
@@ -111,7 +113,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
     last = {}
     state = train_loop(state, step_fn, batches, key=jax.random.PRNGKey(seed + 1), num_steps=steps,
                        checkpointer=ckpt, logger=logger, log_every=log_every,
-                       ckpt_every=ckpt_every or max(50, steps // 10), desc="zeggs", progress=progress,
+                       ckpt_every=ckpt_every if ckpt_every is not None else max(50, steps // 10), desc="zeggs",
+                       progress=progress,
                        on_log=lambda s, m: last.update(m))
     ckpt.close()
     wall = time.perf_counter() - t0

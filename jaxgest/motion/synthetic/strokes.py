@@ -5,11 +5,15 @@ Hand targets are (out, up, forward) in cm relative to the upper-arm joint, in th
 apex (seconds at tempo 1): preparation, apex (on the audio onset), hold; then a retraction to the rest
 pose unless the next stroke follows too closely. The hand comes to a full stop only at an apex and at rest
 (*stop* keys); the preparation and hold keys are *via* points the hand passes through without stopping.
-Between two stop keys the motion is one minimum-jerk movement (References: Flash & Hogan 1985) along the
-path through the via keys (hand keys along arcs around the shoulder), so the hand decelerates into every
-apex and the hold is a slow drift out of it: a stroke's speed minimum is its apex, on the stressed
-syllable, as in the gesture-speech synchrony of beat gestures (McNeill 1992; Pouw et al. 2020). Then the
-style's low-pass filter and tremor are applied. Before a stroke that starts from rest, the hand leaves
+Between two stop keys the motion is one minimum-jerk time course (References: Flash & Hogan 1985) along the
+path through the via keys (hand keys along arcs around the shoulder; each key segment gets its share of the
+movement's time), so the hand decelerates into every apex, on the stressed syllable, as in the
+gesture-speech synchrony of beat gestures (McNeill 1992; Pouw et al. 2020); no other stop follows until
+rest. During the hold the hand stays at (raise, bow, wave) or drifts slightly from (beat, point, arms-open)
+the apex, then moves into the retraction without stopping; the speed rises there within a frame in the
+keyframe tracks, which the style's low-pass filter smooths (hand accelerations stay within those of the
+all-stops design). A stroke's speed minimum therefore lies in the apex-to-hold plateau, 0.1-0.2 s after the
+apex once smoothed. Then the style's low-pass filter and tremor are applied. Before a stroke that starts from rest, the hand leaves
 the rest pose ``LEAVE`` s (at tempo 1) before its preparation key.
 
 | stroke    | prep (t, target)      | apex target    | hold (t, target)     | torso pitch / head at apex | extra                   |
@@ -56,7 +60,7 @@ def min_jerk(tau):
 
 
 def _stop_warp(times, stops, t):
-    """Key segment index ``k`` (F,) and linear weight ``w`` (F,) at frame times ``t`` after the time warp.
+    """Key segment ``(k, k1)`` (F,), (F,) and linear weight ``w`` (F, 1) at frame times ``t`` after the time warp.
 
     Between consecutive stop keys a and b the frame time is mapped to the virtual time
     ``T_a + min_jerk((t - T_a) / (T_b - T_a)) (T_b - T_a)`` and the keys are joined linearly in virtual
@@ -109,7 +113,7 @@ def _add_keys(keys, new, kinds, rest, lead):
     what overlaps; apex keys are never dropped. When the timeline ends at rest (a stop) well before the
     stroke, the hand stays there until ``lead`` s before the first key (a stop at ``rest``)."""
     t_first = new[0][0]
-    while keys and keys[-1][0] > t_first - 0.08 and keys[-1][2] != APEX:
+    while len(keys) > 1 and keys[-1][0] > t_first - 0.08 and keys[-1][2] != APEX:  # keys[0]: the start pose
         keys.pop()
     if keys and keys[-1][2] == STOP and keys[-1][0] < t_first - lead - 0.08:
         keys.append((t_first - lead, rest, STOP))
@@ -117,7 +121,7 @@ def _add_keys(keys, new, kinds, rest, lead):
         if keys and t <= keys[-1][0] + 0.08 and kind != APEX:
             continue
         if keys and t <= keys[-1][0]:  # an apex inside the previous hold: cut the hold
-            while keys and keys[-1][0] >= t - 0.05 and keys[-1][2] != APEX:
+            while len(keys) > 1 and keys[-1][0] >= t - 0.05 and keys[-1][2] != APEX:
                 keys.pop()
         keys.append((t, v, kind))
 
@@ -135,7 +139,7 @@ def stroke_tracks(script, style, t):
     shrug_keys = {"L": [(0.0, np.zeros(1), STOP)], "R": [(0.0, np.zeros(1), STOP)]}
     osc = {"L": np.zeros((len(t), 3)), "R": np.zeros((len(t), 3))}
     scale = np.array([style.width, 1.0, 1.0])
-    lead = LEAVE / style.tempo
+    lead = max(LEAVE / style.tempo, 0.12)  # > the 0.08 s merge distance, so very fast tempi keep the preparation
     for s in script.strokes:
         keys = KEYS[s.kind]
         # preparation at least 0.28 s before the apex: fast styles stay within human joint speeds

@@ -192,3 +192,24 @@ def test_load_model_is_cached_until_the_workdir_is_retrained(trained, tmp_path):
     assert again is not first
     flat = lambda m: np.concatenate([np.ravel(x) for x in jax.tree_util.tree_leaves(m.params["transformer"])])
     assert not np.allclose(flat(again), flat(first))
+
+
+def test_training_the_autoencoder_further_retrains_a_stale_transformer(trained, tmp_path):
+    """Raising --ae-steps on a finished workdir: the transformer trained on the old autoencoder is kept under
+    another name (nothing lost) and a fresh one is trained on the new autoencoder."""
+    import shutil
+
+    from jaxgest.tgst.train import format_summary, train
+
+    data, work0, _ = trained
+    work = tmp_path / "w"
+    shutil.copytree(work0, work)
+    s = train(data, work, preset="tiny", ae_steps=5, transformer_steps=2, progress=False, log_every=1, ckpt_every=1)
+    assert s["ae"]["start_step"] == 4 and s["ae"]["steps"] == 5
+    assert s["transformer"]["start_step"] == 0 and s["transformer"]["steps"] == 2
+    assert s["stale_transformer"] == "transformer.autoencoder-step-4"
+    assert (work / "checkpoints" / "transformer.autoencoder-step-4").is_dir()
+    assert "was moved to checkpoints/transformer.autoencoder-step-4 and retrained" in format_summary(s)
+    again = train(data, work, preset="tiny", ae_steps=5, transformer_steps=2, progress=False)
+    assert again["stale_transformer"] is None
+    assert "autoencoder already at step 5, nothing to do; transformer already at step 2" in format_summary(again)

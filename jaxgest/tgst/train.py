@@ -148,8 +148,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     d_ae, d_tr = DEFAULT_STEPS[preset]
     ae_steps = d_ae if ae_steps is None else int(ae_steps)
     transformer_steps = d_tr if transformer_steps is None else int(transformer_steps)
-    if ae_steps < 0 or transformer_steps < 0:
-        raise JaxgestError("step counts must be >= 0")
+    training.check_steps(ae_steps=ae_steps, transformer_steps=transformer_steps)
+    training.check_intervals(log_every=log_every, ckpt_every=ckpt_every)
     workdir = pathlib.Path(workdir)
     if workdir.exists() and not workdir.is_dir():
         raise DataError(f"{workdir}: exists and is not a directory")
@@ -165,6 +165,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     # Check both stages' checkpoints before writing anything (another preset must not load silently).
     ae_ckpt = ae_checkpointer(workdir, cfg)
     _check_existing(ae_ckpt)
+    _stored_transformer_meta(workdir, cfg, check=True)  # everything but the autoencoder step it was trained on
     config_json = {"kind": "tgst", "preset": preset, "config": dataclasses.asdict(cfg), "data": str(pathlib.Path(data_dir)),
                    "data_summary": tdata.describe(body_data, cfg), "seed": int(seed), **info,
                    "skeleton": tdata.BODY_SIGNATURE}
@@ -191,6 +192,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     ae_ckpt.close()
 
     # ---- stage 2: transformer (autoencoder frozen, closed over by the step)
+    summary["stale_transformer"] = set_aside_stale_transformer(workdir, cfg, ae_done)
     tr_ckpt = transformer_checkpointer(workdir, cfg, ae_done)
     tr_step_fn, tx_tr = compiled_transformer_step(cfg, mesh)
     tr_state = parallel.replicate(
@@ -207,6 +209,43 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     return summary
 
 
+def _stored_transformer_meta(workdir, cfg: TGSTConfig, check: bool = False) -> Optional[dict]:
+    """The stored meta of the transformer checkpoint (None without one); ``check``: raise on a config mismatch
+    other than the autoencoder step."""
+    if not (pathlib.Path(workdir) / TRANSFORMER_SUBDIR).is_dir():
+        return None
+    probe = transformer_checkpointer(workdir, cfg, None, read_only=True)
+    try:
+        stored = probe.stored_meta()
+        if check and stored is not None:
+            probe.check_meta(stored)
+        return stored
+    finally:
+        probe.close()
+
+
+def set_aside_stale_transformer(workdir, cfg: TGSTConfig, ae_step: int) -> Optional[str]:
+    """Move a transformer checkpoint trained on another autoencoder step out of the way (renamed, not deleted)
+    so the transformer retrains on the current autoencoder; returns the new folder name, or None."""
+    stored = _stored_transformer_meta(workdir, cfg)
+    old = (stored or {}).get("config", {}).get("autoencoder_step")
+    if stored is None or old is None or int(old) == int(ae_step):
+        return None
+    src = pathlib.Path(workdir).resolve() / TRANSFORMER_SUBDIR
+    dst = src.with_name(f"{src.name}.autoencoder-step-{old}")
+    k = 1
+    while dst.exists():
+        k += 1
+        dst = src.with_name(f"{src.name}.autoencoder-step-{old}.{k}")
+    if jax.process_index() == 0:
+        src.rename(dst)
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        multihost_utils.sync_global_devices("tgst: stale transformer set aside")
+    return dst.name
+
+
 def _run_stage(state, step_fn, batch_fn, mesh, *, key, num_steps, checkpointer, logger, desc, progress,
                log_every, ckpt_every, last):
     start = int(jax.device_get(state.step))
@@ -215,7 +254,7 @@ def _run_stage(state, step_fn, batch_fn, mesh, *, key, num_steps, checkpointer, 
         state = training.train_loop(
             state, step_fn, parallel.sharded_batch_fn(batch_fn, mesh),
             key=key, num_steps=num_steps, checkpointer=checkpointer, logger=logger,
-            log_every=max(1, min(log_every, num_steps)), ckpt_every=ckpt_every, desc=desc, progress=progress,
+            log_every=min(log_every, num_steps), ckpt_every=ckpt_every, desc=desc, progress=progress,
             on_log=lambda s, m: last.update(m))
     wall = time.perf_counter() - t
     done = int(jax.device_get(state.step))
@@ -228,9 +267,14 @@ def _run_stage(state, step_fn, batch_fn, mesh, *, key, num_steps, checkpointer, 
 def format_summary(s: dict) -> str:
     """One line for the CLI."""
     def part(name, d):
-        loss = f"loss {d['loss']:.4g}" if "loss" in d else "resumed, nothing to do"
+        if d["steps"] == d["start_step"]:
+            done = "no steps requested" if d["steps"] == 0 else f"already at step {d['steps']}, nothing to do"
+            return f"{name} {done}"
         extra = f" ({d['angle_deg']:.2f} deg)" if "angle_deg" in d else ""
-        return f"{name} {d['steps']} steps {loss}{extra}, {d['steps_per_s']:.1f} steps/s"
+        return (f"{name} {d['steps']} steps (from {d['start_step']}) loss {d.get('loss', float('nan')):.4g}{extra}, "
+                f"{d['steps_per_s']:.1f} steps/s")
+    stale = (f" (the transformer trained on the earlier autoencoder was moved to checkpoints/"
+             f"{s['stale_transformer']} and retrained)" if s.get("stale_transformer") else "")
     return (f"tgst train ({s['preset']}, {s['devices']} device(s), windows {s['windows']['ae']}/"
             f"{s['windows']['transformer']}): {part('autoencoder', s['ae'])}; "
-            f"{part('transformer', s['transformer'])}; {s['wall_s']:.1f} s -> {s['workdir']}")
+            f"{part('transformer', s['transformer'])}{stale}; {s['wall_s']:.1f} s -> {s['workdir']}")

@@ -269,6 +269,21 @@ def _check_params(step: int, params, stage: str, checkpointer) -> None:
                             f"{_kept(checkpointer)} {_HINT}")
 
 
+def check_intervals(**intervals) -> None:
+    """Raise :class:`TrainingError` unless every given interval (``log_every=50, ...``; None = default) is a
+    positive whole number of steps."""
+    for name, value in intervals.items():
+        if value is not None and not (isinstance(value, (int, np.integer)) and value >= 1):
+            raise TrainingError(f"{name} must be a positive number of steps, got {value!r}")
+
+
+def check_steps(**counts) -> None:
+    """Raise :class:`TrainingError` if a given step count (None = default) is negative."""
+    for name, value in counts.items():
+        if value is not None and int(value) < 0:
+            raise TrainingError(f"{name} must be >= 0, got {value}")
+
+
 def train_loop(
     state,
     step_fn: Callable,
@@ -292,9 +307,7 @@ def train_loop(
     """
     from tqdm.auto import tqdm
 
-    for name, value in (("log_every", log_every), ("ckpt_every", ckpt_every)):
-        if not (isinstance(value, (int, np.integer)) and value >= 1):
-            raise TrainingError(f"{name} must be a positive number of steps, got {value!r}")
+    check_intervals(log_every=log_every, ckpt_every=ckpt_every)
     start = int(jax.device_get(state.step))
     if start >= num_steps:
         return state

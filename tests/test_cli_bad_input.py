@@ -12,6 +12,7 @@ up to ``jaxgest.zeggs.data.LENGTH_TOLERANCE_S`` (1 s; both are cut to the shorte
 
 from __future__ import annotations
 
+import json
 import pathlib
 import re
 import shutil
@@ -224,11 +225,26 @@ def test_training_without_data_uses_the_builtin_synthetic_data(capsys, tmp_path)
     assert rc == 0 and "no steps requested" in stdout
 
 
+@pytest.mark.parametrize("model", ["zeggs", "tgst"])
+def test_training_without_data_checks_arguments_first_and_keeps_the_recorded_data(ctx, capsys, tmp_path, model):
+    work = tmp_path / "w"
+    rc, msg = run_cli([model, "train", "--workdir", work, "--steps", "-3"], capsys)
+    assert rc == 2 and "must be >= 0, got -3" in msg and not (work / "synthetic-data").exists(), msg
+    work.mkdir()
+    (work / "config.json").write_text(json.dumps({"data": str(ctx["data"])}))
+    rc, msg = run_cli([model, "train", "--workdir", work, "--steps", "0"], capsys)
+    assert rc == 2 and f"was trained on {ctx['data']}; pass --data {ctx['data']} to resume" in msg, msg
+    assert not (work / "synthetic-data").exists()
+
+
+@pytest.mark.parametrize("model", ["zeggs", "tgst"])
 @pytest.mark.parametrize("flag", ["--ckpt-every", "--log-every"])
-def test_training_with_a_non_positive_interval(ctx, capsys, tmp_path, flag):
-    rc, msg = run_cli(["zeggs", "train", "--data", ctx["data"], "--workdir", tmp_path / "w", "--steps", "1",
-                       flag, "0"], capsys)
+def test_training_with_a_non_positive_interval(ctx, capsys, tmp_path, flag, model):
+    work = tmp_path / "w"
+    rc, msg = run_cli([model, "train", "--data", ctx["data"], "--workdir", work, "--steps", "1", flag, "0"],
+                      capsys)
     assert rc == 2 and f"{flag[2:].replace('-', '_')} must be a positive number of steps, got 0" in msg, msg
+    assert not (work / "checkpoints").exists()
 
 
 def test_training_with_negative_steps(ctx, capsys, tmp_path):

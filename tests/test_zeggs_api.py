@@ -317,3 +317,17 @@ def test_train_cli_on_a_finished_workdir_says_nothing_to_do(trained, capsys):
     out = capsys.readouterr().out
     assert "is already trained to step" in out and "nothing to do" in out and "nan" not in out
     assert (work / "metrics.jsonl").read_text() == before
+
+
+def test_style_example_prefers_another_content_of_the_same_style():
+    from types import SimpleNamespace as C
+
+    from jaxgest.zeggs.evaluate import style_example
+
+    clip = C(style="sad", content="greeting", path="greeting_sad_0.bvh")
+    other_content = C(style="sad", content="apology", path="apology_sad_0.bvh")
+    same_content = C(style="sad", content="greeting", path="greeting_sad_1.bvh")
+    other_style = C(style="proud", content="apology", path="apology_proud_0.bvh")
+    assert style_example(clip, [other_style, same_content, other_content]) is other_content
+    assert style_example(clip, [other_style, same_content]) is same_content  # another take, same content
+    assert style_example(clip, [other_style, clip]) is clip  # nothing else of this style: the clip itself

@@ -47,10 +47,13 @@ def register(subparsers) -> None:
 def _train(args) -> int:
     from jaxgest.commands.data import training_data
     from jaxgest.tgst.train import format_summary, train
+    from jaxgest.training import check_intervals, check_steps
 
     ae = args.ae_steps if args.ae_steps is not None else args.steps
     tr = args.transformer_steps if args.transformer_steps is not None else args.steps
     ablate = tuple(a.strip() for a in args.ablate.split(",") if a.strip()) if args.ablate else ()
+    check_steps(ae_steps=ae, transformer_steps=tr)  # before any data is written
+    check_intervals(log_every=args.log_every, ckpt_every=args.ckpt_every)
     summary = train(training_data(args.data, args.workdir), args.workdir, preset=args.preset, ae_steps=ae,
                     transformer_steps=tr, seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
                     ablate=ablate)

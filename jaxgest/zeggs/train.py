@@ -25,10 +25,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgest import parallel
-from jaxgest.errors import CheckpointError, DataError, JaxgestError, TrainingError
+from jaxgest.errors import CheckpointError, DataError, JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
-from jaxgest.training import Checkpointer, MetricsLogger, TrainState, train_loop, write_json_atomic
+from jaxgest.training import (Checkpointer, MetricsLogger, TrainState, check_intervals, check_steps, train_loop,
+                              write_json_atomic)
 from jaxgest.zeggs import data as zdata
 from jaxgest.zeggs.config import config_from_dict, get_config
 from jaxgest.zeggs.steps import init_params, make_optimizer, make_train_step
@@ -51,8 +52,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
           ckpt_every: Optional[int] = None, overrides: Optional[dict] = None) -> dict:
     """Train (or resume) ZeroEGGS; returns a summary dict (final metrics, wall time, steps/s)."""
     parallel.maybe_initialize_distributed()
-    if steps is not None and int(steps) < 0:
-        raise TrainingError(f"steps must be >= 0, got {steps}")
+    check_steps(steps=steps)
+    check_intervals(log_every=log_every, ckpt_every=ckpt_every)
     t0 = time.perf_counter()
     workdir = pathlib.Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)

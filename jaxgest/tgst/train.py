@@ -271,8 +271,8 @@ def format_summary(s: dict) -> str:
             done = "no steps requested" if d["steps"] == 0 else f"already at step {d['steps']}, nothing to do"
             return f"{name} {done}"
         extra = f" ({d['angle_deg']:.2f} deg)" if "angle_deg" in d else ""
-        return (f"{name} {d['steps']} steps (from {d['start_step']}) loss {d.get('loss', float('nan')):.4g}{extra}, "
-                f"{d['steps_per_s']:.1f} steps/s")
+        return (f"{name} {d['steps']} steps loss {d.get('loss', float('nan')):.4g}{extra}, "
+                f"{d['steps_per_s']:.1f} steps/s (from step {d['start_step']})")
     stale = (f" (the transformer trained on the earlier autoencoder was moved to checkpoints/"
              f"{s['stale_transformer']} and retrained)" if s.get("stale_transformer") else "")
     return (f"tgst train ({s['preset']}, {s['devices']} device(s), windows {s['windows']['ae']}/"

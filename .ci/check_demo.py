@@ -1,5 +1,5 @@
 """CI check of `jaxgest demo` outputs: every GIF has more than one frame, every BVH loads in an independent
-parser (tests/test_bvh.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK, and
+parser (tests/bvh_testing.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK, and
 metrics.json holds finite numbers."""
 
 import json
@@ -11,7 +11,7 @@ import numpy as np
 from PIL import Image
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
-from test_bvh import reference_fk  # noqa: E402
+from bvh_testing import reference_fk  # noqa: E402
 
 from jaxgest.motion import bvh, kinematics  # noqa: E402
 

@@ -24,6 +24,7 @@ import pathlib
 import time
 
 from jaxgest.errors import DataError
+from jaxgest.tgst.model import METHODS
 
 #: (synthetic clips, seconds, TGST AE steps, TGST transformer steps, ZEGGS steps, GIF seconds)
 PLANS = {
@@ -32,7 +33,6 @@ PLANS = {
 }
 CONTENT, OTHER_CONTENT = "greeting", "directions"  # first two contents of the plan (content-major)
 NEUTRAL, STYLES = "neutral", ("energetic", "sad")
-METHODS = ("soft", "hard", "adain", "avatarnet")
 
 
 def register(subparsers) -> None:

@@ -39,24 +39,17 @@ def register(subparsers) -> None:
                    help="soft swap (paper), hard swap, AdaIN or Avatar-net baselines")
     x.set_defaults(func=_transfer)
 
-    from jaxgest.tgst.evaluate import register_evaluate
-
     register_evaluate(sub)
 
 
 def _train(args) -> int:
-    from jaxgest.commands.data import training_data
     from jaxgest.tgst.train import format_summary, train
-    from jaxgest.training import check_intervals, check_steps
 
     ae = args.ae_steps if args.ae_steps is not None else args.steps
     tr = args.transformer_steps if args.transformer_steps is not None else args.steps
     ablate = tuple(a.strip() for a in args.ablate.split(",") if a.strip()) if args.ablate else ()
-    check_steps(ae_steps=ae, transformer_steps=tr)  # before any data is written
-    check_intervals(log_every=args.log_every, ckpt_every=args.ckpt_every)
-    summary = train(training_data(args.data, args.workdir), args.workdir, preset=args.preset, ae_steps=ae,
-                    transformer_steps=tr, seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-                    ablate=ablate)
+    summary = train(args.data, args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr, seed=args.seed,
+                    devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every, ablate=ablate)
     print(format_summary(summary))
     return 0
 
@@ -79,3 +72,60 @@ def _transfer(args) -> int:
     print(f"tgst: wrote {out} ({result.num_frames} frames at {result.fps:g} fps, {args.method} swap of "
           f"{pathlib.Path(args.content).name} in the style of {pathlib.Path(args.style).name})")
     return 0
+
+
+def _evaluate(args) -> int:
+    from jaxgest.io import check_output_path
+    from jaxgest.tgst.evaluate import evaluate, markdown_table, metric_validity, validity_table
+    from jaxgest.training import write_json_atomic
+
+    check_output_path(args.json)
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    contents = None if args.contents is None else [c.strip() for c in args.contents.split(",") if c.strip()]
+    report = evaluate(
+        args.workdir,
+        args.data,
+        pairs=args.pairs,
+        methods=methods,
+        max_pairs=args.max_pairs,
+        contents=contents,
+        seed=args.seed,
+    )
+    if args.validity:
+        report["metric_validity"] = metric_validity(
+            args.data,
+            pairs="inter" if args.pairs == "intra" else args.pairs,
+            max_pairs=args.max_pairs,
+            contents=contents,
+            seed=args.seed,
+        )
+    write_json_atomic(args.json, report)
+    print(f"{report['pairs']} pairs: {report['num_pairs']} (data {report['data']})")
+    print(markdown_table(report))
+    if args.validity:
+        print()
+        print(validity_table(report["metric_validity"]))
+    return 0
+
+
+def register_evaluate(tgst_subparsers) -> None:
+    """Add ``evaluate`` to the ``jaxgest tgst`` subcommands (SPEC §6): paper Tables 2-3 (and 1)."""
+    from jaxgest.tgst.evaluate import PAIR_MODES
+
+    p = tgst_subparsers.add_parser(
+        "evaluate", help="content/style errors of style transfers (paper Tables 2-3)"
+    )
+    p.add_argument("--workdir", required=True, help="trained TGST workdir")
+    p.add_argument("--data", required=True, help="dataset folder (Bandai-Namco, ZEGGS or manifest.csv)")
+    p.add_argument("--json", required=True, help="output JSON file")
+    p.add_argument("--pairs", choices=PAIR_MODES, default="intra", help="intra-, inter-scenario or all pairs")
+    p.add_argument("--methods", default=",".join(METHODS), help="comma-separated methods (default: all four)")
+    p.add_argument("--max-pairs", type=int, default=None, help="evaluate a seeded random subset of pairs")
+    p.add_argument("--contents", default=None, help="comma-separated content labels of the content clips")
+    p.add_argument("--seed", type=int, default=0, help="seed of the pair subset")
+    p.add_argument(
+        "--validity",
+        action="store_true",
+        help="also compute the metric-validity table (paper Table 1) of the data (inter pairs for --pairs intra)",
+    )
+    p.set_defaults(func=_evaluate)

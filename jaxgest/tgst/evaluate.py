@@ -28,8 +28,8 @@ from jaxgest import metrics
 from jaxgest.errors import DataError
 from jaxgest.motion import body, kinematics
 from jaxgest.motion.skeleton import Motion
+from jaxgest.tgst.model import METHODS
 
-METHODS = ("soft", "hard", "adain", "avatarnet")
 PAIR_MODES = ("intra", "inter", "all")
 NEUTRAL = ("normal", "neutral")
 STATS = ("mean", "worst", "w25")
@@ -390,7 +390,7 @@ def metric_validity(
 
 
 # --------------------------------------------------------------------------------------------------------
-# Command line
+# Report tables
 
 _LABELS = {
     "soft": "Soft swap (ours)",
@@ -430,60 +430,6 @@ def validity_table(table: dict) -> str:
     return "\n".join(lines)
 
 
-def _run(args) -> int:
-    from jaxgest.io import check_output_path
-    from jaxgest.training import write_json_atomic
-
-    check_output_path(args.json)
-    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-    contents = None if args.contents is None else [c.strip() for c in args.contents.split(",") if c.strip()]
-    report = evaluate(
-        args.workdir,
-        args.data,
-        pairs=args.pairs,
-        methods=methods,
-        max_pairs=args.max_pairs,
-        contents=contents,
-        seed=args.seed,
-    )
-    if args.validity:
-        report["metric_validity"] = metric_validity(
-            args.data,
-            pairs="inter" if args.pairs == "intra" else args.pairs,
-            max_pairs=args.max_pairs,
-            contents=contents,
-            seed=args.seed,
-        )
-    write_json_atomic(args.json, report)
-    print(f"{report['pairs']} pairs: {report['num_pairs']} (data {report['data']})")
-    print(markdown_table(report))
-    if args.validity:
-        print()
-        print(validity_table(report["metric_validity"]))
-    return 0
-
-
-def register_evaluate(tgst_subparsers) -> None:
-    """Add ``evaluate`` to the ``jaxgest tgst`` subcommands (SPEC §6)."""
-    p = tgst_subparsers.add_parser(
-        "evaluate", help="content/style errors of style transfers (paper Tables 2-3)"
-    )
-    p.add_argument("--workdir", required=True, help="trained TGST workdir")
-    p.add_argument("--data", required=True, help="dataset folder (Bandai-Namco, ZEGGS or manifest.csv)")
-    p.add_argument("--json", required=True, help="output JSON file")
-    p.add_argument("--pairs", choices=PAIR_MODES, default="intra", help="intra-, inter-scenario or all pairs")
-    p.add_argument("--methods", default=",".join(METHODS), help="comma-separated methods (default: all four)")
-    p.add_argument("--max-pairs", type=int, default=None, help="evaluate a seeded random subset of pairs")
-    p.add_argument("--contents", default=None, help="comma-separated content labels of the content clips")
-    p.add_argument("--seed", type=int, default=0, help="seed of the pair subset")
-    p.add_argument(
-        "--validity",
-        action="store_true",
-        help="also compute the metric-validity table (paper Table 1) of the data (inter pairs for --pairs intra)",
-    )
-    p.set_defaults(func=_run)
-
-
 __all__ = [
     "METHODS",
     "Pair",
@@ -494,6 +440,5 @@ __all__ = [
     "make_pairs",
     "markdown_table",
     "metric_validity",
-    "register_evaluate",
     "validity_table",
 ]

@@ -27,41 +27,6 @@ def register(subparsers) -> None:
     r.set_defaults(func=_render)
 
 
-def training_data(data, workdir) -> pathlib.Path:
-    """The ``--data`` folder of a ``train`` command; without one, the built-in synthetic dataset, written once
-    to ``<workdir>/synthetic-data`` (reused on resume; written to a temporary folder and renamed, so several
-    processes starting together do not read a half-written set). A workdir trained on another folder needs
-    that ``--data`` to resume: raises :class:`DataError` instead of switching datasets silently."""
-    import json
-    import os
-    import shutil
-
-    if data is not None:
-        return pathlib.Path(data)
-    workdir = pathlib.Path(workdir)
-    folder = workdir / "synthetic-data"
-    config = workdir / "config.json"
-    if config.is_file():
-        try:
-            recorded = json.loads(config.read_text()).get("data")
-        except (OSError, ValueError):
-            recorded = None
-        if recorded and pathlib.Path(recorded).resolve() != folder.resolve():
-            raise DataError(f"{workdir}: was trained on {recorded}; pass --data {recorded} to resume it "
-                            "(without --data a train command uses the built-in synthetic data)")
-    if not (folder / "manifest.csv").is_file():
-        from jaxgest.motion.synthetic import write_dataset
-
-        tmp = workdir / f".synthetic-data.tmp-{os.getpid()}"
-        write_dataset(tmp)
-        try:
-            os.rename(tmp, folder)
-        except OSError:  # another process was first
-            shutil.rmtree(tmp, ignore_errors=True)
-    print(f"jaxgest: no --data given: training on the built-in synthetic data in {folder}")
-    return folder
-
-
 def _synth(args) -> int:
     from jaxgest.motion.synthetic import write_dataset
 

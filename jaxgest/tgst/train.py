@@ -32,6 +32,7 @@ import optax
 
 from jaxgest import parallel, training
 from jaxgest.errors import DataError, JaxgestError
+from jaxgest.motion.synthetic.dataset import training_folder
 from jaxgest.tgst import data as tdata
 from jaxgest.tgst.config import TGSTConfig, get_config
 from jaxgest.tgst.model import init_params
@@ -137,7 +138,8 @@ def _check_batch(batch_size: int, mesh, what: str) -> None:
 def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = None,
           transformer_steps: Optional[int] = None, seed: int = 0, devices: Optional[int] = None,
           progress: bool = True, log_every: int = 50, ckpt_every: int = 500, ablate=()) -> dict:
-    """Train (or resume) both TGST stages on ``data_dir`` into ``workdir``; returns a summary dict.
+    """Train (or resume) both TGST stages on ``data_dir`` (None: the built-in synthetic data, written to
+    ``workdir/synthetic-data``) into ``workdir``; returns a summary dict.
 
     Summary: ``{"workdir", "preset", "ae": {"steps", "start_step", "loss", "angle_deg", "wall_s",
     "steps_per_s"}, "transformer": {...same, with the loss terms}, "wall_s", "devices", "windows"}``.
@@ -153,6 +155,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     workdir = pathlib.Path(workdir)
     if workdir.exists() and not workdir.is_dir():
         raise DataError(f"{workdir}: exists and is not a directory")
+    data_dir = training_folder(data_dir, workdir, progress)  # None: the built-in synthetic data
     mesh = parallel.make_mesh(devices)
     info = parallel.device_info(mesh)
 
@@ -165,8 +168,9 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     # Check both stages' checkpoints before writing anything (another preset must not load silently).
     ae_ckpt = ae_checkpointer(workdir, cfg)
     _check_existing(ae_ckpt)
-    _stored_transformer_meta(workdir, cfg, check=True)  # everything but the autoencoder step it was trained on
-    config_json = {"kind": "tgst", "preset": preset, "config": dataclasses.asdict(cfg), "data": str(pathlib.Path(data_dir)),
+    stored_transformer = _stored_transformer_meta(workdir, cfg, check=True)  # all but the autoencoder step
+    config_json = {"kind": "tgst", "preset": preset, "config": dataclasses.asdict(cfg),
+                   "data": str(pathlib.Path(data_dir)),
                    "data_summary": tdata.describe(body_data, cfg), "seed": int(seed), **info,
                    "skeleton": tdata.BODY_SIGNATURE}
     if jax.process_index() == 0:
@@ -192,7 +196,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     ae_ckpt.close()
 
     # ---- stage 2: transformer (autoencoder frozen, closed over by the step)
-    summary["stale_transformer"] = set_aside_stale_transformer(workdir, cfg, ae_done)
+    summary["stale_transformer"] = set_aside_stale_transformer(workdir, stored_transformer, ae_done)
     tr_ckpt = transformer_checkpointer(workdir, cfg, ae_done)
     tr_step_fn, tx_tr = compiled_transformer_step(cfg, mesh)
     tr_state = parallel.replicate(
@@ -224,10 +228,11 @@ def _stored_transformer_meta(workdir, cfg: TGSTConfig, check: bool = False) -> O
         probe.close()
 
 
-def set_aside_stale_transformer(workdir, cfg: TGSTConfig, ae_step: int) -> Optional[str]:
+def set_aside_stale_transformer(workdir, stored: Optional[dict], ae_step: int) -> Optional[str]:
     """Move a transformer checkpoint trained on another autoencoder step out of the way (renamed, not deleted)
-    so the transformer retrains on the current autoencoder; returns the new folder name, or None."""
-    stored = _stored_transformer_meta(workdir, cfg)
+    so the transformer retrains on the current autoencoder; returns the new folder name, or None.
+
+    stored: the transformer checkpoint's meta as read before training (:func:`_stored_transformer_meta`)."""
     old = (stored or {}).get("config", {}).get("autoencoder_step")
     if stored is None or old is None or int(old) == int(ae_step):
         return None

@@ -56,13 +56,9 @@ def register(subparsers) -> None:
 
 
 def _train(args) -> int:
-    from jaxgest.commands.data import training_data
-    from jaxgest.training import check_intervals, check_steps
     from jaxgest.zeggs.train import train
 
-    check_steps(steps=args.steps)  # before any data is written
-    check_intervals(log_every=args.log_every, ckpt_every=args.ckpt_every)
-    r = train(training_data(args.data, args.workdir), args.workdir, preset=args.preset, steps=args.steps,
+    r = train(args.data, args.workdir, preset=args.preset, steps=args.steps,
               seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
               overrides=parse_overrides(args.override))
     final = r["final"]

@@ -28,6 +28,7 @@ from jaxgest import parallel
 from jaxgest.errors import CheckpointError, DataError, JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
+from jaxgest.motion.synthetic.dataset import training_folder
 from jaxgest.training import (Checkpointer, MetricsLogger, TrainState, check_intervals, check_steps, train_loop,
                               write_json_atomic)
 from jaxgest.zeggs import data as zdata
@@ -50,10 +51,12 @@ def _config_for(preset: str, skeleton, overrides: Optional[dict] = None):
 def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = None, seed: int = 0,
           devices: Optional[int] = None, progress: bool = True, log_every: int = 25,
           ckpt_every: Optional[int] = None, overrides: Optional[dict] = None) -> dict:
-    """Train (or resume) ZeroEGGS; returns a summary dict (final metrics, wall time, steps/s)."""
+    """Train (or resume) ZeroEGGS on ``data_dir`` (None: the built-in synthetic data, written to
+    ``workdir/synthetic-data``); returns a summary dict (final metrics, wall time, steps/s)."""
     parallel.maybe_initialize_distributed()
-    check_steps(steps=steps)
+    check_steps(steps=steps)  # before any data is written
     check_intervals(log_every=log_every, ckpt_every=ckpt_every)
+    data_dir = training_folder(data_dir, workdir, progress)  # None: the built-in synthetic data
     t0 = time.perf_counter()
     workdir = pathlib.Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)

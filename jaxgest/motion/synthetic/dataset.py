@@ -69,3 +69,37 @@ def write_dataset(out_dir, clips=None, seed: int = 0, fps: float = 60.0, seconds
     w.writerows(rows)
     write_text_atomic(manifest, buf.getvalue())
     return manifest
+
+
+def training_folder(data_dir, workdir, progress: bool = True) -> pathlib.Path:
+    """The data folder of a training run: ``data_dir``, or (None) the built-in synthetic dataset written once
+    to ``<workdir>/synthetic-data`` (reused on resume; written to a temporary folder and renamed, so several
+    processes starting together do not read a half-written set). A workdir trained on another folder needs
+    that folder to resume: raises :class:`DataError` instead of switching datasets silently."""
+    import json
+    import os
+    import shutil
+
+    if data_dir is not None:
+        return pathlib.Path(data_dir)
+    workdir = pathlib.Path(workdir)
+    folder = workdir / "synthetic-data"
+    config = workdir / "config.json"
+    if config.is_file():
+        try:
+            recorded = json.loads(config.read_text()).get("data")
+        except (OSError, ValueError):
+            recorded = None
+        if recorded and pathlib.Path(recorded).resolve() != folder.resolve():
+            raise DataError(f"{workdir}: was trained on {recorded}; pass --data {recorded} to resume it "
+                            "(without --data a train command uses the built-in synthetic data)")
+    if not (folder / "manifest.csv").is_file():
+        tmp = workdir / f".synthetic-data.tmp-{os.getpid()}"
+        write_dataset(tmp, progress=progress)
+        try:
+            os.rename(tmp, folder)
+        except OSError:  # another process was first
+            shutil.rmtree(tmp, ignore_errors=True)
+    if progress:
+        print(f"jaxgest: no --data given: training on the built-in synthetic data in {folder}")
+    return folder

@@ -223,6 +223,15 @@ def test_training_without_data_uses_the_builtin_synthetic_data(capsys, tmp_path)
     assert len(list((work / "synthetic-data").glob("*.bvh"))) == 42 and (work / "synthetic-data/manifest.csv").is_file()
     rc, stdout = run_cli(["zeggs", "train", "--workdir", work, "--steps", "0"], capsys)  # reused, not rewritten
     assert rc == 0 and "no steps requested" in stdout
+    assert not list(work.glob(".synthetic-data.tmp-*"))  # written to a temporary folder, then renamed
+
+
+def test_tgst_training_without_data_uses_the_builtin_synthetic_data(capsys, tmp_path):
+    work = tmp_path / "w"
+    rc, stdout = run_cli(["tgst", "train", "--workdir", work, "--steps", "0"], capsys)
+    assert rc == 0 and f"built-in synthetic data in {work / 'synthetic-data'}" in stdout, stdout
+    assert "autoencoder no steps requested" in stdout
+    assert json.loads((work / "config.json").read_text())["data"] == str(work / "synthetic-data")
 
 
 @pytest.mark.parametrize("model", ["zeggs", "tgst"])

@@ -190,6 +190,24 @@ def test_hand_stops_only_at_stop_keys():
     assert np.linalg.norm(np.gradient(hand, t, axis=0)[mid]) > 1.0
 
 
+def test_timeline_keeps_its_start_pose_and_fast_preparations():
+    from jaxgest.motion.synthetic.strokes import APEX, STOP, VIA, _add_keys, leave_lead
+
+    rest = np.zeros(3)
+    stroke = [(0.05, np.ones(3)), (0.4, 2 * np.ones(3)), (0.6, 2 * np.ones(3)), (1.0, rest)]
+    kinds = [VIA, APEX, VIA, STOP]
+    keys = [(0.0, rest, STOP)]
+    _add_keys(keys, stroke, kinds, rest, leave_lead(1.0))  # a preparation 50 ms into the clip
+    assert keys[0][0] == 0.0 and keys[0][2] == STOP  # the start pose stays
+    assert [k[0] for k in keys] == sorted(k[0] for k in keys)
+    # a very fast tempo: the leave key must not swallow the preparation key
+    keys = [(0.0, rest, STOP)]
+    prep_at = 2.0
+    _add_keys(keys, [(prep_at, np.ones(3)), (prep_at + 0.1, 2 * np.ones(3)), (prep_at + 0.3, rest)],
+              [VIA, APEX, STOP], rest, leave_lead(4.0))
+    assert any(t == prep_at and kind == VIA for t, _, kind in keys), keys
+
+
 def test_kinematic_beats_of_clean_motion_align_with_speech_onsets(fk):
     """The data property the ZeroEGGS beat-alignment criterion relies on: in every style, the speed minima
     of the captured (clean) motion sit on speech onsets more than on shifted onsets (BeatAlign > control)."""

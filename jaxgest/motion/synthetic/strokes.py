@@ -108,6 +108,12 @@ def interpolate_hand_keys(times, values, t, stops=None, min_radius: float = 20.0
     return u * np.maximum(ra * (1 - w) + rb * w, min_radius)
 
 
+def leave_lead(tempo: float) -> float:
+    """Seconds between leaving the rest pose and a stroke's first key: ``LEAVE / tempo``, but more than the
+    0.08 s within which :func:`_add_keys` merges keys, so very fast tempi keep the preparation key."""
+    return max(LEAVE / tempo, 0.12)
+
+
 def _add_keys(keys, new, kinds, rest, lead):
     """Append one stroke's keys ``(t, value)`` of ``kinds`` to a timeline of ``(t, value, kind)``, trimming
     what overlaps; apex keys are never dropped. When the timeline ends at rest (a stop) well before the
@@ -139,7 +145,7 @@ def stroke_tracks(script, style, t):
     shrug_keys = {"L": [(0.0, np.zeros(1), STOP)], "R": [(0.0, np.zeros(1), STOP)]}
     osc = {"L": np.zeros((len(t), 3)), "R": np.zeros((len(t), 3))}
     scale = np.array([style.width, 1.0, 1.0])
-    lead = max(LEAVE / style.tempo, 0.12)  # > the 0.08 s merge distance, so very fast tempi keep the preparation
+    lead = leave_lead(style.tempo)
     for s in script.strokes:
         keys = KEYS[s.kind]
         # preparation at least 0.28 s before the apex: fast styles stay within human joint speeds

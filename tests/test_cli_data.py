@@ -34,7 +34,8 @@ def test_synth_then_render(synth_dir, tmp_path):
     im = Image.open(tmp_path / "x.gif")
     assert im.n_frames == 20
     r = run("render", files[0], "--out", tmp_path / "x.png", "--png")
-    assert r.returncode == 0, r.stderr and (tmp_path / "x.png").is_file()
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "x.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.mark.parametrize("case", ["missing", "malformed", "outdir", "titles"])

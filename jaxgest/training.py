@@ -511,7 +511,7 @@ class Checkpointer:
         except Exception:  # noqa: BLE001
             return None
         want = _shapes(abstract)
-        if stored == want:
+        if stored == want or not stored:  # nothing listed: the tree metadata itself is damaged
             return None
         missing = sorted(set(want) - set(stored))
         extra = sorted(set(stored) - set(want))

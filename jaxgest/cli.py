@@ -139,7 +139,7 @@ def main(argv=None) -> int:
 
 
 def os_error_message(e: OSError) -> str:
-    """``<file>: <reason>`` of an operating-system error that no jaxgest module turned into its own message."""
+    """``<file>: <reason>`` of an operating-system error no jaxgest module turned into its own message."""
     why = e.strerror or str(e) or type(e).__name__
     name = e.filename if e.filename is not None else None
     if name is None:

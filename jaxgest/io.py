@@ -47,7 +47,8 @@ def atomic_output(path):
     remove_stale_temporaries(path)
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.{TMP_MARK}{os.getpid()}-", suffix=suffix, dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.{TMP_MARK}{os.getpid()}-", suffix=suffix,
+                                   dir=path.parent)
         os.close(fd)
         yield tmp
         os.chmod(tmp, 0o666 & ~_umask())

@@ -125,6 +125,25 @@ def _quiet_absl(level=logging.CRITICAL):
         logger.setLevel(old)
 
 
+def _mute_closed_loop_errors() -> None:
+    """After orbax gave up on a damaged checkpoint (or a failed save), tensorstore still completes the
+    outstanding reads/writes and their callbacks hit orbax's already closed asyncio loop: each prints a
+    "RuntimeError: Event loop is closed" traceback through ``sys.unraisablehook`` (at any later moment, often
+    at exit). Those, and only those, are dropped from then on; every other unraisable error goes through."""
+    if getattr(sys.unraisablehook, "_jaxgest_mutes_closed_loop", False):
+        return
+    previous = sys.unraisablehook
+
+    def hook(unraisable):
+        exc = unraisable.exc_value
+        if isinstance(exc, RuntimeError) and str(exc) == "Event loop is closed":
+            return
+        previous(unraisable)
+
+    hook._jaxgest_mutes_closed_loop = True
+    sys.unraisablehook = hook
+
+
 class _Unreadable(Exception):
     """A checkpoint step that cannot be read (truncated/corrupted/missing files): ``reason`` says how."""
 
@@ -143,8 +162,8 @@ def _reason(e: BaseException) -> str:
         return "its metadata is not valid JSON"
     if any(m in chain for m in ("OUT_OF_RANGE", "byte range", "DATA_LOSS", "Error decoding", "corrupt")):
         return "a data file is truncated or corrupted"
-    if isinstance(e, FileNotFoundError) or any(m in chain for m in ("NOT_FOUND", "No such file", "does not exist",
-                                                                   "not found", "Not found")):
+    missing = ("NOT_FOUND", "No such file", "does not exist", "not found", "Not found")
+    if isinstance(e, FileNotFoundError) or any(m in chain for m in missing):
         return "a file is missing"
     if "Encountered error while reading" in chain:
         return "a data file is missing or corrupted"
@@ -264,7 +283,8 @@ class Checkpointer:
                 cleanup_tmp_directories=not read_only,
                 read_only=read_only,
             )
-            self.manager = ocp.CheckpointManager(self.directory, options=options, item_names=("state", "meta"))
+            self.manager = ocp.CheckpointManager(self.directory, options=options,
+                                                 item_names=("state", "meta"))
 
     def _strict(self) -> bool:
         return _STRICT.get() if self.strict is None else bool(self.strict)
@@ -290,6 +310,7 @@ class Checkpointer:
         except MemoryError:
             raise
         except Exception as e:  # noqa: BLE001  (orbax/tensorstore raise many types for a damaged file)
+            _mute_closed_loop_errors()
             raise _Unreadable(_reason(e)) from None
         return dict(meta)
 
@@ -314,8 +335,8 @@ class Checkpointer:
         version = stored.get("format_version", 1)
         if not isinstance(version, int) or version > FORMAT_VERSION:
             raise CheckpointError(
-                f"{self.directory}: checkpoint written by a newer jaxgest (format version {version}; this one "
-                f"reads up to {FORMAT_VERSION}); upgrade jaxgest, or retrain into a new --workdir")
+                f"{self.directory}: checkpoint written by a newer jaxgest (format version {version}; this "
+                f"one reads up to {FORMAT_VERSION}); upgrade jaxgest, or retrain into a new --workdir")
         problems = []
         if stored.get("kind") != self.meta["kind"]:
             problems.append(f"model kind: {stored.get('kind')!r} -> {self.meta['kind']!r}")
@@ -334,8 +355,8 @@ class Checkpointer:
                 f"with unknown {', '.join(extra[:4])}" if extra else "") if x)
             older = "an older" if not extra else ("a newer" if not missing else "another")
             raise CheckpointError(
-                f"{self.directory}: checkpoint from {older} version of jaxgest (config {what}); retrain into a "
-                "new --workdir with this version (checkpoints are not converted)")
+                f"{self.directory}: checkpoint from {older} version of jaxgest (config {what}); retrain "
+                "into a new --workdir with this version (checkpoints are not converted)")
         problems.extend(diff)
         if problems:
             shown = "; ".join(problems[:4]) + (f"; and {len(problems) - 4} more" if len(problems) > 4 else "")
@@ -370,10 +391,12 @@ class Checkpointer:
         except MemoryError:
             raise
         except Exception as e:  # noqa: BLE001
+            _mute_closed_loop_errors()
             self._settle()
             self._remove_partial(step, before)
             last = [s for s in self.all_steps() if s != step]
-            kept = f"the last good checkpoint (step {last[-1]}) is kept" if last else "no checkpoint was written"
+            kept = (f"the last good checkpoint (step {last[-1]}) is kept" if last else
+                    "no checkpoint was written")
             raise WriteError(f"{self._where(step)} could not be written ({_write_reason(e)}); stopped, "
                                   f"{kept}") from None
 
@@ -443,7 +466,8 @@ class Checkpointer:
         if bad:
             listed = "; ".join(f"step {s}: {r}" for s, r in bad)
             raise CheckpointError(f"{self.workdir}: no readable {self.stage} checkpoint ({listed}); restore "
-                                  f"{self.directory.name}/ from a backup, or move it aside to train from scratch")
+                                  f"{self.directory.name}/ from a backup, or move it aside to train from "
+                                  "scratch")
         return None, None
 
     def _report_fallback(self, bad, used: int) -> None:
@@ -458,7 +482,8 @@ class Checkpointer:
         moved = [self._set_aside(s) for s, _ in bad]
         with _quiet_absl():
             self.manager.reload()
-        warn(f"{what}; resuming from step {used} (moved to checkpoints/{', '.join(moved)}; nothing was deleted)")
+        warn(f"{what}; resuming from step {used} (moved to checkpoints/{', '.join(moved)}; nothing was "
+             "deleted)")
 
     def _set_aside(self, step: int) -> str:
         src = self.directory / str(step)
@@ -483,18 +508,20 @@ class Checkpointer:
         """Restore ``{params, opt_state, step}`` of ``step`` (``abstract``: target structure, or None)."""
         meta = self._read_meta(step)
         self.check_meta(meta)
-        args = self._ocp.args.StandardRestore(abstract) if abstract is not None else self._ocp.args.StandardRestore()
+        args = (self._ocp.args.StandardRestore(abstract) if abstract is not None else
+                self._ocp.args.StandardRestore())
         try:
             with _quiet_absl():
                 restored = self.manager.restore(step, args=self._ocp.args.Composite(state=args))["state"]
         except MemoryError:
             raise
         except Exception as e:  # noqa: BLE001
+            _mute_closed_loop_errors()
             if abstract is not None:
                 mismatch = self._structure_mismatch(step, abstract)
                 if mismatch:
-                    raise CheckpointError(f"{self.directory}: checkpoint at step {step} does not fit this model "
-                                          f"({mismatch})") from None
+                    raise CheckpointError(f"{self.directory}: checkpoint at step {step} does not fit this "
+                                          f"model ({mismatch})") from None
             raise _Unreadable(_reason(e)) from None
         if meta.get("sha256") is not None and _digest(restored) not in (None, meta["sha256"]):
             raise _Unreadable("its arrays do not match the checksum saved with them")
@@ -503,7 +530,7 @@ class Checkpointer:
         return restored
 
     def _structure_mismatch(self, step: int, abstract) -> Optional[str]:
-        """How the stored tree differs from ``abstract`` (None: it does not, or its metadata is unreadable)."""
+        """How the stored tree differs from ``abstract`` (None: it does not, or its metadata is damaged)."""
         try:
             with _quiet_absl():
                 md = self._ocp.StandardCheckpointer().metadata(self.directory / str(step) / "state")
@@ -592,7 +619,8 @@ def check_workdir_config(workdir, kind: Optional[str] = None, *, lenient: bool =
         if not isinstance(stored, dict):
             raise ValueError("not a JSON object")
     except (OSError, UnicodeDecodeError, ValueError) as e:
-        why = e.strerror if isinstance(e, OSError) and e.strerror else "not valid JSON: truncated or corrupted?"
+        why = (e.strerror if isinstance(e, OSError) and e.strerror else
+               "not valid JSON: truncated or corrupted?")
         if lenient:
             return None
         raise CheckpointError(f"{path}: unreadable ({why}); restore it from a backup or retrain into a new "
@@ -602,8 +630,9 @@ def check_workdir_config(workdir, kind: Optional[str] = None, *, lenient: bool =
         raise CheckpointError(f"{path}: format_version {version!r} is not a version number; retrain into a "
                               "new --workdir")
     if version > FORMAT_VERSION:
-        raise CheckpointError(f"{workdir}: written by a newer jaxgest (workdir format {version}, this version "
-                              f"reads up to {FORMAT_VERSION}); upgrade jaxgest, or retrain into a new --workdir")
+        raise CheckpointError(f"{workdir}: written by a newer jaxgest (workdir format {version}, this "
+                              f"version reads up to {FORMAT_VERSION}); upgrade jaxgest, or retrain into a new "
+                              "--workdir")
     model = stored.get("kind", stored.get("model"))
     if model not in MODELS:
         raise CheckpointError(f"{workdir}: config.json names {'no model' if model is None else repr(model)} "

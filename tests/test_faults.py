@@ -494,6 +494,11 @@ def test_truncated_config_json(ctx, capsys, tmp_path, model):
     rc, err, _ = run(infer(ctx, model, work, tmp_path / "o.bvh"), capsys)
     assert rc == 2 and err == (f"jaxgest: {work}/config.json: unreadable (not valid JSON: truncated or "
                                "corrupted?); restore it from a backup or retrain into a new --workdir"), err
+    # training rewrites config.json (the checkpoints carry their own config): nothing to train, file repaired
+    steps = ["--ae-steps", 4, "--transformer-steps", 4] if model == "tgst" else ["--steps", 4]
+    rc, err, out = run([model, "train", "--data", ctx["data"], "--workdir", work, *steps], capsys)
+    assert rc == 0 and err == "" and "nothing to do" in out, (err, out)
+    assert json.loads((work / "config.json").read_text())["format_version"] == FORMAT_VERSION
 
 
 # ----- SIGKILL in the middle of a write (subprocesses) -----------------------------------------------------
@@ -581,15 +586,17 @@ ck.save(state.replace(step=jnp.int32(4)))
     assert sorted(p.name for p in ckdir.iterdir()) == ["2"]  # orbax removed the unfinished save
 
 
-def test_corrupt_checkpoint_in_a_real_process_is_one_clean_line(ctx, tmp_path):
+@pytest.mark.parametrize("strict", [True, pytest.param(False, marks=pytest.mark.slow)])
+def test_corrupt_checkpoint_in_a_real_process_is_one_clean_line(ctx, tmp_path, strict):
     """The original report: a truncated transformer checkpoint and ``tgst transfer`` in a fresh process --
-    exit 0 with one warning line (no traceback, no asyncio noise at exit); --strict: exit 2, one line."""
+    --strict: exit 2, one line; without: exit 0 with one warning line. No traceback, no asyncio "Event loop
+    is closed" from orbax's unfinished reads at exit (the slow case compiles the transfer in the subprocess)."""
     work = copy(ctx, "tgst", tmp_path)
     truncate_data(work / "checkpoints" / "transformer" / "4")
     env = _env()
     env.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
-    for strict, status in ((False, 0), (True, 2)):
-        out = tmp_path / f"o{int(strict)}.bvh"
+    for status in ([2] if strict else [0]):
+        out = tmp_path / "o.bvh"
         r = subprocess.run([sys.executable, "-m", "jaxgest.cli", *map(str, infer(ctx, "tgst", work, out, strict))],
                            env=env, capture_output=True, text=True, timeout=600)
         assert r.returncode == status, r.stderr[-3000:]

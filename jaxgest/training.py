@@ -126,10 +126,11 @@ def _quiet_absl(level=logging.CRITICAL):
 
 
 def _mute_closed_loop_errors() -> None:
-    """After orbax gave up on a damaged checkpoint (or a failed save), tensorstore still completes the
+    """When orbax gives up on a damaged checkpoint (or a failed save), tensorstore still completes the
     outstanding reads/writes and their callbacks hit orbax's already closed asyncio loop: each prints a
-    "RuntimeError: Event loop is closed" traceback through ``sys.unraisablehook`` (at any later moment, often
-    at exit). Those, and only those, are dropped from then on; every other unraisable error goes through."""
+    "RuntimeError: Event loop is closed" traceback through ``sys.unraisablehook`` (while orbax gives up, or
+    later, often at exit). Installed by every Checkpointer, this hook drops those, and only those; every
+    other unraisable error goes through to the previous hook."""
     if getattr(sys.unraisablehook, "_jaxgest_mutes_closed_loop", False):
         return
     previous = sys.unraisablehook
@@ -267,6 +268,7 @@ class Checkpointer:
         self.restored_step: Optional[int] = None  # the step the last restore used
         self.meta = _normalise({"kind": kind, "config": dict(config), "skeleton": skeleton})
         check_workdir_config(self.workdir, kind, lenient=True)
+        _mute_closed_loop_errors()  # before any read: a damaged file's callbacks fire while orbax gives up
         if read_only and not self.directory.is_dir():
             raise CheckpointError(f"{self.workdir}: no checkpoint found (missing {self.directory.name}/)")
         if not read_only:

@@ -8,6 +8,12 @@ Every model (TGST autoencoder, TGST transformer, ZEGGS) trains through :func:`tr
 * orbax ``CheckpointManager`` keeps ``{params, opt_state, step}`` plus a JSON ``meta`` item holding the
   kind of model, its config and the skeleton signature; restoring with a different one stops with a
   one-line :class:`~jaxgest.errors.CheckpointError` that names the differing fields;
+* faults of the environment are one line: a checkpoint that cannot be read (truncated, corrupted -- each
+  stores a sha256 of its arrays -- or missing files) is skipped for the newest readable one with a one-line
+  warning (``strict_checkpoints`` / ``--strict``: an error instead), a save that cannot complete (disk full,
+  read-only) is a :class:`~jaxgest.errors.WriteError` with no partial folder left, and a workdir or
+  checkpoint stamped with a newer ``format_version`` (:data:`FORMAT_VERSION`; absent = 1) or naming an
+  unknown model is refused (:func:`check_workdir_config`);
 * ``workdir/metrics.jsonl`` gets one JSON line per log step and ``workdir/config.json`` the config;
 * a non-finite loss stops training with :class:`~jaxgest.errors.TrainingError`, keeping the last good
   checkpoint (nothing is saved after the bad step). Metrics are checked at every log or checkpoint step,

@@ -490,8 +490,7 @@ class Checkpointer:
         moved = [self._set_aside(s) for s, _ in bad]
         with _quiet_absl():
             self.manager.reload()
-        warn(f"{what}; resuming from step {used} (moved to checkpoints/{', '.join(moved)}; nothing was "
-             "deleted)")
+        warn(f"{what}; resuming from step {used} (moved to {', '.join(moved)}; nothing was deleted)")
 
     def _set_aside(self, step: int) -> str:
         src = self.directory / str(step)
@@ -510,7 +509,10 @@ class Checkpointer:
             from jax.experimental import multihost_utils
 
             multihost_utils.sync_global_devices(f"jaxgest: unreadable {self.stage} step {step} set aside")
-        return dst.name
+        try:
+            return str(dst.relative_to(self.workdir.resolve()))
+        except ValueError:
+            return str(dst)
 
     def _read_state(self, step: int, abstract):
         """Restore ``{params, opt_state, step}`` of ``step`` (``abstract``: target structure, or None)."""

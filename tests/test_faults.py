@@ -237,7 +237,9 @@ def test_toy_resume_after_corrupt_latest_equals_uninterrupted(tmp_path, key, cap
                          progress=False)
     ck.close()
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "toy checkpoint at step 8 is unreadable" in err and "resuming from step 4" in err
+    assert err == (f"jaxgest: warning: {tmp_path}: toy checkpoint at step 8 is unreadable (a data file is truncated "
+                   "or corrupted); resuming from step 4 (moved to checkpoints.unreadable-step-8; nothing was "
+                   "deleted)\n"), err
     np.testing.assert_array_equal(np.asarray(resumed.params["w"]), np.asarray(full.params["w"]))
     assert sorted(p.name for p in (tmp_path / "checkpoints").iterdir()) == ["12", "8"]
     assert (tmp_path / "checkpoints.unreadable-step-8").is_dir()

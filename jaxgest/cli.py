@@ -1,8 +1,10 @@
 """The ``jaxgest`` command line (SPEC §6). Thin: parse, then call the api modules.
 
 Each command group lives beside its code and exposes ``register(subparsers)``; the registered parser
-sets ``func`` to a callable ``func(args) -> int | None``. Every :class:`jaxgest.errors.JaxgestError`
-becomes one line on stderr and exit status 2.
+sets ``func`` to a callable ``func(args) -> int | None``. Every :class:`jaxgest.errors.JaxgestError`, and
+every ``OSError`` no module handled (a full or read-only disk, ...), becomes one line on stderr and exit
+status 2. Every command that reads a workdir gets ``--strict`` (refuse an unreadable checkpoint instead of
+falling back to an older one).
 
 Progress bars (tqdm, drawn on stderr) are shown only when stderr is a terminal: when it is a file or a
 pipe, the bars' carriage-return redraws are dropped, so a failed command's stderr is exactly its one-line
@@ -30,6 +32,30 @@ COMMAND_MODULES = (
 )
 
 
+WORKDIR_OPTIONS = ("--workdir", "--zeggs-workdir", "--tgst-workdir")
+
+
+def _leaf_parsers(parser: argparse.ArgumentParser):
+    """Every (sub)command parser that runs something (has no subcommands of its own)."""
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        yield parser
+    for action in subs:
+        for child in dict.fromkeys(action.choices.values()):  # aliases map to the same parser
+            yield from _leaf_parsers(child)
+
+
+def add_strict_flag(parser: argparse.ArgumentParser) -> None:
+    """``--strict`` on every command that reads a workdir's checkpoints: refuse an unreadable checkpoint
+    instead of falling back to the newest readable one (:func:`jaxgest.training.strict_checkpoints`)."""
+    for p in _leaf_parsers(parser):
+        options = {o for a in p._actions for o in a.option_strings}
+        if options & set(WORKDIR_OPTIONS) and "--strict" not in options:
+            p.add_argument("--strict", action="store_true",
+                           help="stop at an unreadable checkpoint instead of falling back to the newest "
+                                "readable one")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="jaxgest",
@@ -44,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         module.register(sub)
+    add_strict_flag(parser)
     return parser
 
 
@@ -91,16 +118,38 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    strict = contextlib.nullcontext()
+    if getattr(args, "strict", False):
+        from jaxgest.training import strict_checkpoints
+
+        strict = strict_checkpoints(True)
     try:
-        with _stderr_without_bars():
+        with _stderr_without_bars(), strict:
             rc = args.func(args)
     except JaxgestError as e:
-        print(f"jaxgest: {e}", file=sys.stderr)
+        print(f"jaxgest: {_one_line(str(e))}", file=sys.stderr)
+        return 2
+    except OSError as e:  # the environment: a full or read-only disk, a vanished folder, ...
+        print(f"jaxgest: {_one_line(os_error_message(e))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("jaxgest: interrupted", file=sys.stderr)
         return 130
     return int(rc or 0)
+
+
+def os_error_message(e: OSError) -> str:
+    """``<file>: <reason>`` of an operating-system error no jaxgest module turned into its own message."""
+    why = e.strerror or str(e) or type(e).__name__
+    name = e.filename if e.filename is not None else None
+    if name is None:
+        return why
+    other = f" -> {e.filename2}" if getattr(e, "filename2", None) else ""
+    return f"{name}{other}: {why}"
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split()) if "\n" in text or "\r" in text else text
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """User-facing errors.
 
-Every error a user can cause with plausible input derives from :class:`JaxgestError`. The CLI catches
+Every error a user can cause with plausible input, or that the environment causes (an unreadable checkpoint,
+a full or read-only disk, a workdir of another version), derives from :class:`JaxgestError`. The CLI catches
 it, prints ``jaxgest: <message>`` as one line on stderr and exits with status 2 -- never a traceback.
 Messages name the file (when there is one) and the problem.
 """
@@ -22,6 +23,11 @@ class AudioError(DataError):
 
 class CheckpointError(JaxgestError):
     """A workdir has no checkpoint, or its config/skeleton differs from what is asked for."""
+
+
+class WriteError(JaxgestError):
+    """A file or checkpoint cannot be written (disk full, read-only or missing folder, ...); nothing partial
+    is left and what was there before is unchanged."""
 
 
 class TrainingError(JaxgestError):

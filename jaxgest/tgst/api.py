@@ -23,7 +23,6 @@ References: Kuriyama et al. 2022, §3.1 and Fig. 2.
 from __future__ import annotations
 
 import functools
-import json
 import pathlib
 from typing import Optional
 
@@ -145,8 +144,10 @@ def _load_cached(resolved: str, mtime_ns: int, given: str) -> TGSTModel:
 
     workdir = pathlib.Path(given)
     cfg_path = workdir / "config.json"
+    from jaxgest.training import check_workdir_config
+
     try:
-        stored = json.loads(cfg_path.read_text())
+        stored = check_workdir_config(workdir)  # one line for an unreadable, newer or unknown config.json
         # ZeroEGGS workdirs name their model under "model"; check the kind before reading a TGST config
         kind = stored.get("kind", stored.get("model", "tgst"))
         if kind != "tgst":

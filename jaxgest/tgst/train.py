@@ -169,8 +169,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     ae_ckpt = ae_checkpointer(workdir, cfg)
     _check_existing(ae_ckpt)
     stored_transformer = _stored_transformer_meta(workdir, cfg, check=True)  # all but the autoencoder step
-    config_json = {"kind": "tgst", "preset": preset, "config": dataclasses.asdict(cfg),
-                   "data": str(pathlib.Path(data_dir)),
+    config_json = {"kind": "tgst", "format_version": training.FORMAT_VERSION, "preset": preset,
+                   "config": dataclasses.asdict(cfg), "data": str(pathlib.Path(data_dir)),
                    "data_summary": tdata.describe(body_data, cfg), "seed": int(seed), **info,
                    "skeleton": tdata.BODY_SIGNATURE}
     if jax.process_index() == 0:

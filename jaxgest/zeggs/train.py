@@ -15,7 +15,6 @@ References: Ghorbani et al. 2023, §4.3.
 
 from __future__ import annotations
 
-import json
 import pathlib
 import time
 from typing import Optional
@@ -29,8 +28,8 @@ from jaxgest.errors import CheckpointError, DataError, JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
 from jaxgest.motion.synthetic.dataset import training_folder
-from jaxgest.training import (Checkpointer, MetricsLogger, TrainState, check_intervals, check_steps, train_loop,
-                              write_json_atomic)
+from jaxgest.training import (FORMAT_VERSION, Checkpointer, MetricsLogger, TrainState, check_intervals,
+                              check_steps, check_workdir_config, train_loop, write_json_atomic)
 from jaxgest.zeggs import data as zdata
 from jaxgest.zeggs.config import config_from_dict, get_config
 from jaxgest.zeggs.steps import init_params, make_optimizer, make_train_step
@@ -96,7 +95,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
         bvh.save(ref.replace(rotations=ref.rotations[:2], translations=ref.translations[:2]),
                  workdir / "reference.bvh")
         write_json_atomic(workdir / "config.json", {
-            "model": KIND, "preset": preset, "config": cfg.to_dict(), "steps": steps, "seed": seed,
+            "model": KIND, "format_version": FORMAT_VERSION, "preset": preset, "config": cfg.to_dict(),
+            "steps": steps, "seed": seed,
             "data": str(data_dir), "skeleton": skeleton.signature(), "num_joints": skeleton.num_joints,
             **info})
 
@@ -156,12 +156,16 @@ def load_workdir(workdir):
     if not cfg_path.is_file():
         raise CheckpointError(f"{workdir}: no ZeroEGGS model here (missing config.json; train with "
                               "`jaxgest zeggs train --data DIR --workdir W`)")
-    meta = json.loads(cfg_path.read_text())
+    meta = check_workdir_config(workdir)  # one line for an unreadable, newer or unknown config.json
     if meta.get("model") != KIND:
         raise CheckpointError(f"{workdir}: holds a {meta.get('model', meta.get('kind', 'unknown'))!r} model, not a ZeroEGGS model")
-    cfg = config_from_dict(meta["config"])
-    ckpt = Checkpointer(workdir, kind=KIND, config={"preset": meta["preset"], **cfg.to_dict()},
-                        skeleton=meta["skeleton"], subdir=CKPT_SUBDIR, read_only=True, ignore=IGNORED)
+    try:
+        cfg, preset, skeleton = config_from_dict(meta["config"]), meta["preset"], meta["skeleton"]
+    except (ValueError, KeyError, TypeError, AttributeError) as e:
+        raise CheckpointError(f"{cfg_path}: config from another version of jaxgest ({type(e).__name__}: {e}); "
+                              "retrain into a new --workdir") from None
+    ckpt = Checkpointer(workdir, kind=KIND, config={"preset": preset, **cfg.to_dict()},
+                        skeleton=skeleton, subdir=CKPT_SUBDIR, read_only=True, ignore=IGNORED)
     template = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
     params = ckpt.restore_params(jax.tree_util.tree_map(lambda s: np.zeros(s.shape, s.dtype), template))
     ckpt.close()

@@ -114,9 +114,11 @@ def _evaluate(args) -> int:
                 if any("too short" in e.get("skipped", "") or "shorter than one style window" in e.get("skipped", "")
                        for e in r["errors"].values()))
     if short:
-        print(f"\n{short} of {report['num_pairs']} pairs skipped: a clip is too short for the "
-              f"{report['protocol']['name']} protocol's {report['protocol']['trim_seconds']:g} s cut at both ends plus "
-              "one style window (per-pair reasons in the JSON; --trim SECONDS shortens the cut)")
+        cut = report["protocol"]["trim_seconds"]
+        need = f"its {cut:g} s cut at both ends plus one style window" if cut else "one style window"
+        print(f"\n{short} of {report['num_pairs']} pairs skipped: a clip is too short for "
+              f"{need} ({report['protocol']['name']} protocol; per-pair reasons in the JSON"
+              f"{'; --trim SECONDS shortens the cut' if cut else ''})")
     diag = diagnostics_table(report)
     if diag:
         print()

@@ -601,8 +601,8 @@ def evaluate(
     content or style clip is too short for the cut or one style window are skipped (not transferred) and
     counted, as are transfers the model rejects with a DataError; a ground truth that is too short gives no
     ground-truth errors for that pair. ``bucket``: length-bucket ratio of :class:`BatchedTransfer` (<= 1:
-    exact per-pair shapes, one compilation per pair). The controls take the content clip and the style clip themselves as the
-    result. Swap diagnostics (:func:`swap_diagnostics`) of the soft swap are averaged over pairs when
+    exact per-pair shapes, one compilation per pair). The controls take the content clip and the style clip
+    themselves as the result. Swap diagnostics (:func:`swap_diagnostics`) of the soft swap are averaged over pairs when
     "soft" or "hard" is evaluated with a TGSTModel.
     References: Kuriyama et al. 2022, §4.3, Tables 2 and 3.
     """

@@ -17,7 +17,7 @@ def register(subparsers) -> None:
     t.add_argument("--data", default=None, help="folder: ZEGGS layout or manifest.csv with audio "
                    "(default: the built-in synthetic data, written to W/synthetic-data)")
     t.add_argument("--workdir", required=True, help="run folder (checkpoints, stats, metrics.jsonl)")
-    t.add_argument("--preset", default="tiny", choices=("tiny", "paper"))
+    t.add_argument("--preset", default="tiny", choices=("tiny", "small", "paper"))
     t.add_argument("--steps", type=int, default=None, help="total training steps (default: tiny 300)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")

@@ -65,7 +65,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
         raise DataError(f"{data_dir}: no clip has audio (ZeroEGGS needs BVH + WAV pairs)")
     skeleton = clips[0].motion.skeleton
     cfg = _config_for(preset, skeleton, overrides)
-    steps = int(steps if steps is not None else (300 if preset == "tiny" else 120_000))
+    steps = int(steps if steps is not None else {"tiny": 300, "small": 8000}.get(preset, 120_000))
 
     stats_paths = workdir / "pose_stats.json", workdir / "speech_stats.json"
     resume = all(p.is_file() for p in stats_paths)
@@ -110,7 +110,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
 
     def batch_fn(i):
         return data.batch(i, seed=seed, batch=cfg.batch_size, window=cfg.window,
-                          style_min=cfg.style_window_min, style_max=cfg.style_window_max)
+                          style_min=cfg.style_window_min, style_max=cfg.style_window_max,
+                          sampling=cfg.style_sampling)
 
     batches = parallel.sharded_batch_fn(batch_fn, mesh)
     logger = MetricsLogger(workdir, extra={"stage": KIND, **info})

@@ -37,5 +37,13 @@ def finite(x):
 
 
 assert finite(report["style_transfer"]) and finite(report["timings_s"])
+gen = report["generation"]
+assert finite(gen), "generation metrics hold a NaN or inf"
+probe = gen["style_probe"]  # the ZeroEGGS probe comes with its controls, on the same folds
+for task in ("style", "content"):
+    for k in ("trained", "random_init", "raw_statistics"):
+        assert 0.0 <= probe[task][k]["accuracy"] <= 1.0 and probe[task][k]["ci95_half_width"] >= 0.0, (task, k)
+lk = gen["leakage"]["contrasts"]  # and the leakage contrast (same style vs another style)
+assert {"other_style - same_style_other_content", "zero - same_style_other_content"} <= set(lk), lk
 print(f"demo outputs ok: {len(gifs)} GIFs, {len(files)} BVH files (independent parser), metrics.json "
       f"({report['timings_s']['total_s']:.0f} s)")

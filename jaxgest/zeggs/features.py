@@ -111,6 +111,20 @@ class RootSpec:
         return RootSpec(spine=names[chain[-1]], hips=names[hips], left_hip=left, right_hip=right)
 
 
+def translated_joints(skeleton: Skeleton) -> tuple[int, ...]:
+    """Joints whose translation a generated pose sets: the root and its single-child chain down to the hips.
+
+    On the ZEGGS rig that is the root (Hips) alone; on Bandai-Namco it is the static wrapper ``joint_Root``
+    and the animated ``Hips`` under it. Every other joint keeps its rest offset (bone length).
+    """
+    root = next(i for i, p in enumerate(skeleton.parents) if p < 0)
+    hips = skeleton.index(RootSpec.for_skeleton(skeleton).hips)
+    chain = [hips]
+    while chain[-1] != root:
+        chain.append(int(skeleton.parents[chain[-1]]))
+    return tuple(sorted(chain))
+
+
 def _find(names, candidates):
     for c in candidates:
         if c in names:
@@ -259,11 +273,14 @@ def features_to_motion(features: np.ndarray, template: Motion, root_position: np
     for j in range(J):
         p = sk.parents[j]
         local[:, j] = grot[:, j] if p < 0 else R.quat_mul(R.quat_inv(grot[:, p]), grot[:, j])
-    # Joints whose translation is animated in the template (the root; Bandai-Namco's Hips) get it back
-    # from the predicted positions; the others keep the template's rest offsets (bone lengths).
+    # The root and the joints down to the hips (Bandai-Namco's Hips under a static joint_Root) get their
+    # translation back from the predicted positions -- a property of the rig, not of the template's frames
+    # (at inference the template repeats one frame); so do joints animated in a multi-frame template.
+    # The others keep the template's rest offsets (bone lengths).
     world = R.quat_rotate(root_rotation[:, None], lpos) + np.asarray(root_position, np.float64)[:, None]
     trans = np.broadcast_to(sk.offsets[None], (F, J, 3)).copy()
     animated = template.translations.std(axis=0).max(axis=-1) > 1e-6
+    animated[list(translated_joints(sk))] = True
     for j in range(J):
         p = sk.parents[j]
         if p < 0:

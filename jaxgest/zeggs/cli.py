@@ -32,7 +32,10 @@ def register(subparsers) -> None:
     g.add_argument("--workdir", required=True)
     g.add_argument("--audio", required=True, help="WAV/FLAC speech (any sample rate or channel count)")
     g.add_argument("--style", action="append", required=True, help="style example BVH (repeat to blend)")
-    g.add_argument("--weights", default=None, help="blend weights, comma-separated, one per --style")
+    g.add_argument("--weights", default=None, help="blend weights, comma-separated, one per --style, used as "
+                   "given (2,0 doubles the first style's embedding; default: the average)")
+    g.add_argument("--normalize-weights", action="store_true",
+                   help="divide the blend weights by their sum (which must then be positive)")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--temperature", type=float, default=1.0)
     g.add_argument("--pca-edit", action="append", default=[], metavar="K=DELTA",
@@ -130,7 +133,7 @@ def _generate(args) -> int:
         raise JaxgestError(f"{args.audio}: no such audio file")
     model = load_model(args.workdir)
     motion = model.generate(args.audio, styles, weights=weights, seed=args.seed, temperature=args.temperature,
-                            pca_edits=edits, name=out.stem)
+                            pca_edits=edits, name=out.stem, normalize_weights=args.normalize_weights)
     bvh.save(motion, out)
     print(f"zeggs: wrote {out} ({motion.num_frames} frames at {motion.fps:g} fps, "
           f"{motion.skeleton.num_joints} joints)")

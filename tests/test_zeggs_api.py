@@ -338,3 +338,36 @@ def test_style_example_prefers_another_content_of_the_same_style():
     assert style_example(clip, [other_style, same_content, other_content]) is other_content
     assert style_example(clip, [other_style, same_content]) is same_content  # another take, same content
     assert style_example(clip, [other_style, clip]) is clip  # nothing else of this style: the clip itself
+
+
+def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, tmp_path):
+    """A model trained before speech loudness normalisation existed is fed unnormalised speech."""
+    import shutil
+
+    from jaxgest.zeggs.inference import load_model
+
+    _, work, _ = trained
+    assert load_model(work).cfg.loudness is True  # the default of new models
+    old = tmp_path / "old"
+    shutil.copytree(work, old)
+    meta = json.loads((old / "config.json").read_text())
+    del meta["config"]["loudness"]
+    (old / "config.json").write_text(json.dumps(meta))
+    assert load_model(old).cfg.loudness is False
+
+
+def test_train_cli_no_loudness_flag_reaches_the_config(monkeypatch):
+    from jaxgest.cli import main
+    from jaxgest.zeggs import train as ztrain
+
+    seen = {}
+
+    def fake_train(data, workdir, **kw):
+        seen.update(kw)
+        return {"final": {}, "start_step": 1, "steps": 1}
+
+    monkeypatch.setattr(ztrain, "train", fake_train)
+    assert main(["zeggs", "train", "--workdir", "w", "--no-loudness"]) == 0
+    assert seen["overrides"] == {"loudness": False}
+    assert main(["zeggs", "train", "--workdir", "w"]) == 0
+    assert seen["overrides"] == {}

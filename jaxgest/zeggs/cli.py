@@ -26,6 +26,8 @@ def register(subparsers) -> None:
     t.add_argument("--log-every", type=int, default=25, help="metrics.jsonl line every N steps")
     t.add_argument("--override", action="append", default=[], metavar="FIELD=VALUE",
                    help="replace a config field of the preset, e.g. gru_hidden=128 or speech_channels=32,32")
+    t.add_argument("--no-loudness", action="store_true",
+                   help="use the speech as recorded (default: loudness-normalised to -20 LUFS, as the authors)")
     t.set_defaults(func=_train)
 
     g = sub.add_parser("generate", help="gestures for a speech file in the style of example clip(s)")
@@ -63,7 +65,7 @@ def _train(args) -> int:
 
     r = train(args.data, args.workdir, preset=args.preset, steps=args.steps,
               seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-              overrides=parse_overrides(args.override))
+              overrides={**parse_overrides(args.override), **({"loudness": False} if args.no_loudness else {})})
     final = r["final"]
     if r["start_step"] >= r["steps"]:
         if r["start_step"] == 0:

@@ -101,6 +101,8 @@ class ZeggsConfig:
     # --- compilation ----------------------------------------------------------------------------------
     xla_opt_level: Optional[int] = None  # XLA backend optimisation level of every jitted function (None:
     #   XLA's default). 0 compiles ~2.5x faster and runs ~3x slower: right for tiny models and short runs.
+    # fidelity
+    loudness: bool = True  # speech loudness-normalised to -20 LUFS (ITU-R BS.1770) before features, as the authors
 
     def __post_init__(self):
         if len(self.speech_channels) != len(self.speech_kernels):

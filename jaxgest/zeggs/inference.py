@@ -40,6 +40,17 @@ from jaxgest.zeggs.style_encoder import sample_style
 MIN_STYLE_SECONDS = 0.5  # the shortest style example accepted (frames at the model rate below this are too few)
 
 
+# Config fields added after models were trained with the old behaviour: a workdir whose config.json lacks
+# one was trained with this value (the dataclass default is the new behaviour).
+LEGACY_DEFAULTS = {"loudness": False}
+
+
+def legacy_config(cfg, stored: dict):
+    """``cfg`` with the old behaviour of every field missing from a workdir's stored config dict."""
+    missing = {k: v for k, v in LEGACY_DEFAULTS.items() if k not in stored}
+    return cfg.replace(**missing) if missing else cfg
+
+
 def validate_weights(weights, count: int, *, normalize: bool = False) -> np.ndarray:
     """Blend weights as an array: one per style clip, finite (default ``1 / count`` each).
 
@@ -77,6 +88,7 @@ class ZeggsModel_:
 
         self.workdir = pathlib.Path(workdir)
         (self.cfg, params, self.pose_stats, self.speech_stats, self.reference, self.meta) = load_workdir(workdir)
+        self.cfg = legacy_config(self.cfg, self.meta["config"])
         self.params = jax.tree_util.tree_map(jnp.asarray, params)
         self._mean = jnp.asarray(self.pose_stats.mean, jnp.float32)
         self._std = jnp.asarray(self.pose_stats.std, jnp.float32)
@@ -153,7 +165,7 @@ class ZeggsModel_:
             if sr is None:
                 raise JaxgestError("an audio array needs its sample rate")
         duration = len(y) / float(sr)
-        feats = speech_features(y, sr=sr, fps=self.cfg.fps)
+        feats = speech_features(y, sr=sr, fps=self.cfg.fps, loudness=self.cfg.loudness)
         if len(feats) < 2:
             raise DataError(f"{audio if isinstance(audio, (str, pathlib.Path)) else 'audio'}: "
                             f"{duration:.3f} s of audio is too short to generate from")

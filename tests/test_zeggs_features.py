@@ -114,3 +114,48 @@ def test_bandai_one_frame_template_keeps_hips(bandai_dir):
     assert [sk.names[j] for j in Fe.translated_joints(sk)] == ["joint_Root", "Hips"]
     assert m.translations[:, sk.index("Hips")].std(0).max() > 1.0
     check_one_frame_template_keeps_hips(m)
+
+
+def test_fk_positions_of_target_features_equal_their_positions(synthetic_motion):
+    """FK of the root-frame rotations with the rig's offsets gives back the root-frame positions (the loss's
+    FK is what features_to_motion renders), also under a static wrapper root."""
+    import jax.numpy as jnp
+
+    from jaxgest.zeggs import losses as L
+    from jaxgest.zeggs.config import get_config
+
+    for m in (synthetic_motion, _wrap_in_static_root(synthetic_motion)):
+        J = m.skeleton.num_joints
+        cfg = get_config("tiny", num_joints=J, **Fe.fk_fields(m.skeleton))
+        x = Fe.extract_features(m)["features"]
+        lay = Fe.PoseLayout(J)
+        rot = jnp.asarray(x[:, lay.local_rotations].reshape(-1, J, 6))
+        pos = jnp.asarray(x[:, lay.local_positions].reshape(-1, J, 3))
+        fk = np.asarray(L.forward_kinematics(rot, pos, cfg))
+        np.testing.assert_allclose(fk, np.asarray(pos), atol=2e-3)
+        # Only the translated joints are read from `pos`: moving the others' channels changes nothing,
+        # moving the hips' moves the whole body.
+        other = np.setdiff1d(np.arange(J), Fe.translated_joints(m.skeleton))
+        np.testing.assert_allclose(L.forward_kinematics(rot, pos.at[:, other].add(50.0), cfg), fk, atol=1e-4)
+        hips = Fe.translated_joints(m.skeleton)[-1]
+        moved = np.asarray(L.forward_kinematics(rot, pos.at[:, hips].add(jnp.array([0.0, 0.0, 5.0])), cfg))
+        np.testing.assert_allclose(moved[:, other] - fk[:, other], np.broadcast_to([0, 0, 5.0], moved[:, other].shape),
+                                   atol=1e-4)
+
+
+@pytest.mark.realdata
+def test_fk_positions_on_bandai(bandai_dir):
+    import jax.numpy as jnp
+
+    from jaxgest.zeggs import losses as L
+    from jaxgest.zeggs.config import get_config
+
+    m = bvh.load(sorted(bandai_dir.glob("*.bvh"))[5])
+    m = m.replace(rotations=m.rotations[:200], translations=m.translations[:200])
+    J = m.skeleton.num_joints
+    cfg = get_config("tiny", num_joints=J, **Fe.fk_fields(m.skeleton))
+    x = Fe.extract_features(m)["features"]
+    lay = Fe.PoseLayout(J)
+    pos = x[:, lay.local_positions].reshape(-1, J, 3)
+    fk = L.forward_kinematics(jnp.asarray(x[:, lay.local_rotations].reshape(-1, J, 6)), jnp.asarray(pos), cfg)
+    np.testing.assert_allclose(np.asarray(fk), pos, atol=5e-3)

@@ -125,6 +125,35 @@ def translated_joints(skeleton: Skeleton) -> tuple[int, ...]:
     return tuple(sorted(chain))
 
 
+def fk_fields(skeleton: Skeleton) -> dict:
+    """The rig as ``ZeggsConfig`` fields (``fk_parents``, ``fk_offsets``, ``fk_translated``), so the losses
+    can compute joint positions by forward kinematics of the predicted rotations (what is rendered)."""
+    return {"fk_parents": tuple(int(p) for p in skeleton.parents),
+            "fk_offsets": tuple(float(x) for x in np.asarray(skeleton.offsets, np.float64).ravel()),
+            "fk_translated": translated_joints(skeleton)}
+
+
+def fk_chain_matrix(parents, translated) -> tuple[np.ndarray, np.ndarray]:
+    """``(anchor (J,), chain (J, J))`` for FK from root-frame rotations: joint j's position is
+    ``pos[anchor[j]] + sum_k chain[j, k] * bone_k`` with ``bone_k = R_parent(k) offset_k``.
+
+    ``anchor[j]`` is the nearest joint at or above j whose translation the pose sets (``translated``; the
+    root always), ``chain[j, k] = 1`` for the joints k on the path from j up to, not including, the anchor.
+    """
+    parents = np.asarray(parents, np.int64)
+    J = len(parents)
+    fixed = set(int(t) for t in translated) | {j for j in range(J) if parents[j] < 0}
+    anchor = np.zeros(J, np.int64)
+    chain = np.zeros((J, J), np.float32)
+    for j in range(J):
+        k = j
+        while k not in fixed:
+            chain[j, k] = 1.0
+            k = int(parents[k])
+        anchor[j] = k
+    return anchor, chain
+
+
 def _find(names, candidates):
     for c in candidates:
         if c in names:

@@ -106,6 +106,13 @@ class ZeggsConfig:
     # --- compilation ----------------------------------------------------------------------------------
     xla_opt_level: Optional[int] = None  # XLA backend optimisation level of every jitted function (None:
     #   XLA's default). 0 compiles ~2.5x faster and runs ~3x slower: right for tiny models and short runs.
+    # fidelity
+    loudness: bool = True  # speech loudness-normalised to -20 LUFS (ITU-R BS.1770) before features, as the authors
+    fk_parents: tuple[int, ...] = ()  # the rig's parents: position terms by FK of the predicted rotations (() : on
+    #   the predicted root-frame positions, the old behaviour); set from the data by train (features.fk_fields)
+    fk_offsets: tuple[float, ...] = ()  # the rig's rest offsets, J * 3 (file units)
+    fk_translated: tuple[int, ...] = ()  # joints whose translation the pose sets (root and its chain to the hips)
+    w_predicted_position: float = 1.0  # with FK: the predicted root-frame position channels themselves (read back)
     # style sampling / evaluation
     style_sampling: str = "disjoint"  # where a training style window comes from (jaxgest.zeggs.data.style_window):
     #   "overlap" (the paper: contains the target), "disjoint" (same clip, apart from the target) or

@@ -98,14 +98,14 @@ def _time_resample(x: np.ndarray, frames: int) -> np.ndarray:
 
 
 def clip_sequences(clip: Clip, *, fps: float, mirror: bool = True, speeds: Sequence[float] = SPEEDS,
-                   min_frames: int = 2) -> list[Sequence_]:
+                   min_frames: int = 2, loudness: bool = True) -> list[Sequence_]:
     """All training sequences of one clip (original, mirrored; each at every speed)."""
     from jaxgest.audio import speech_features
 
     if clip.audio is None:
         raise DataError(f"{clip.path}: no audio next to this clip (ZeroEGGS trains on speech + motion)")
     samples, sr = load_clip_audio(clip)
-    speech = np.asarray(speech_features(samples, sr=sr, fps=fps), np.float32)
+    speech = np.asarray(speech_features(samples, sr=sr, fps=fps, loudness=loudness), np.float32)
     out = []
     variants = [("", clip.motion)] + ([("_mirror", K.mirror(clip.motion))] if mirror else [])
     for suffix, motion in variants:
@@ -247,7 +247,7 @@ def style_window(sequences, i: int, rng, *, window: int, style_min: int, style_m
 
 def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Sequence[float] = SPEEDS,
           pose_stats: Optional[NormStats] = None, speech_stats: Optional[NormStats] = None,
-          progress: bool = False) -> ZeggsData:
+          progress: bool = False, loudness: bool = True) -> ZeggsData:
     """Sequences of every clip and (unless given) the normalisation statistics fitted on them."""
     if not clips:
         raise DataError("no clips to train on")
@@ -259,7 +259,7 @@ def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Seq
 
     seqs = []
     for c in tqdm(clips, desc="features", disable=not progress, leave=False):
-        seqs.extend(clip_sequences(c, fps=fps, mirror=mirror, speeds=speeds))
+        seqs.extend(clip_sequences(c, fps=fps, mirror=mirror, speeds=speeds, loudness=loudness))
     if not seqs:
         raise DataError("every clip is too short to use")
     pose_stats = pose_stats or NormStats.from_data([s.pose for s in seqs])

@@ -32,6 +32,7 @@ from jaxgest.motion.synthetic.dataset import training_folder
 from jaxgest.training import (Checkpointer, MetricsLogger, TrainState, check_intervals, check_steps, train_loop,
                               write_json_atomic)
 from jaxgest.zeggs import data as zdata
+from jaxgest.zeggs import features as Fe
 from jaxgest.zeggs.config import config_from_dict, get_config
 from jaxgest.zeggs.steps import init_params, make_optimizer, make_train_step
 
@@ -43,7 +44,7 @@ _COMPILED: dict = {}  # (config, statistics, devices, argument shapes) -> compil
 
 def _config_for(preset: str, skeleton, overrides: Optional[dict] = None):
     try:
-        return get_config(preset, num_joints=skeleton.num_joints, **(overrides or {}))
+        return get_config(preset, num_joints=skeleton.num_joints, **{**Fe.fk_fields(skeleton), **(overrides or {})})
     except ValueError as e:
         raise DataError(str(e)) from None
 
@@ -73,7 +74,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
     speech_stats = NormStats.load(stats_paths[1]) if resume else None
     a = cfg.speed_augmentation
     data = zdata.build(clips, fps=cfg.fps, mirror=cfg.mirror, speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,),
-                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress)
+                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=cfg.loudness)
     if data.pose_dim != cfg.pose_dim:
         raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {cfg.pose_dim}")
 

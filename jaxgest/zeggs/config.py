@@ -27,6 +27,15 @@ style encoder's second conv outputs 2 D_e channels and the FFT block runs at tha
 paper's "64 channels" for the FFT convs is D_e, the code's projection to 2 D_e *is* that second conv),
 so ``style_projection=False`` in the paper preset adds no extra layer.
 
+Style sampling (``style_sampling``; SPEC §4): the paper draws the training style window so that it
+*contains* the target window (``"overlap"``), which lets the style embedding describe the target's own
+gestures (content) instead of the style. SPEC §4 allows a window apart from the target if it is measured
+against the paper's; the default ``"disjoint"`` takes it from the same clip but not overlapping the target
+(``"other-clip"``: another clip with the same style label). The three were compared on identical data and
+steps with ``jaxgest zeggs evaluate``'s leakage report and probes (``experiments/zeggs_synthetic``):
+``"disjoint"`` is the one where a same-style example of other content reconstructs better than another
+style's and the style probe clears its random-init control.
+
 Every config is a frozen (hashable, jit-static) dataclass of JSON-friendly fields: ``cfg.to_dict()`` is
 stored with checkpoints and :func:`config_from_dict` rebuilds it.
 """

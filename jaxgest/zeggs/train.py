@@ -162,7 +162,7 @@ def load_workdir(workdir):
     if meta.get("model") != KIND:
         raise CheckpointError(f"{workdir}: holds a {meta.get('model', meta.get('kind', 'unknown'))!r} model, not a ZeroEGGS model")
     cfg = config_from_dict(meta["config"])
-    ckpt = Checkpointer(workdir, kind=KIND, config={"preset": meta["preset"], **cfg.to_dict()},
+    ckpt = Checkpointer(workdir, kind=KIND, config={"preset": meta["preset"], **meta["config"]},  # as stored
                         skeleton=meta["skeleton"], subdir=CKPT_SUBDIR, read_only=True, ignore=IGNORED)
     template = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
     params = ckpt.restore_params(jax.tree_util.tree_map(lambda s: np.zeros(s.shape, s.dtype), template))

@@ -115,24 +115,30 @@ def test_style_window_modes(frames, window, smin, extra, seed):
     assert j == 2 and (s0 + m <= t0 or s0 >= t0 + window)
 
 
+def _find(norm, block):
+    """Start frames ``u`` where ``norm[u:u + len(block)]`` equals ``block`` (first-row match, then the rest)."""
+    n = len(block)
+    cand = np.flatnonzero(np.abs(norm[:len(norm) - n + 1] - block[0]).max(axis=1) < 1e-5)
+    return [int(u) for u in cand if np.abs(norm[u:u + n] - block).max() < 1e-5]
+
+
 def test_batch_sampling_modes(synth_dir, tmp_path):
     bvhs = sorted(synth_dir.glob("*.bvh"))  # relabelled: two clips of style "a", one of style "b"
     (tmp_path / "manifest.csv").write_text("path,content,style,audio\n" + "".join(
         f"{p.resolve()},c{i},{'aab'[i]},{p.with_suffix('.wav').resolve()}\n" for i, p in enumerate(bvhs)))
     data = D.load(tmp_path, fps=60, speeds=(1.0,))
+    norms = [data.pose_stats.normalize(s.pose) for s in data.sequences]
     kw = dict(seed=1, batch=6, window=64, style_min=64, style_max=96)
     for mode in D.SAMPLING_MODES:
         b = data.batch(2, sampling=mode, **kw)
         for r in range(6):  # locate the target and its style window among the sequences' frames
             target = b["pose"][r]
             style = b["style"][r, :int(b["style_mask"][r].sum())]
-            own = [s for s in data.sequences if any(np.allclose(data.pose_stats.normalize(s.pose[t:t + 64]), target,
-                                                                 atol=1e-5) for t in range(s.frames - 63))]
+            own = [(i, u) for i in range(len(norms)) for u in _find(norms[i], target)]
             assert len(own) == 1
-            s = own[0]
-            norm = data.pose_stats.normalize(s.pose)
-            t0 = next(t for t in range(s.frames - 63) if np.allclose(norm[t:t + 64], target, atol=1e-5))
-            hits = [u for u in range(s.frames - len(style) + 1) if np.allclose(norm[u:u + len(style)], style, atol=1e-5)]
+            i, t0 = own[0]
+            s = data.sequences[i]
+            hits = _find(norms[i], style)
             alone = mode == "other-clip" and s.style == "b"  # no other clip of its style: disjoint
             if mode == "overlap":
                 assert any(u <= t0 and t0 + 64 <= u + len(style) for u in hits)
@@ -140,9 +146,7 @@ def test_batch_sampling_modes(synth_dir, tmp_path):
                 assert hits and all(u + len(style) <= t0 or u >= t0 + 64 for u in hits)
             else:  # another clip of the same style
                 assert not hits
-                src = [o for o in data.sequences if o.clip != s.clip and any(
-                    np.allclose(data.pose_stats.normalize(o.pose[u:u + len(style)]), style, atol=1e-5)
-                    for u in range(o.frames - len(style) + 1))]
+                src = [o for o, x in zip(data.sequences, norms) if o.clip != s.clip and _find(x, style)]
                 assert src and all(o.style == s.style for o in src)
     with pytest.raises(DataError, match="unknown style sampling"):
         data.batch(0, sampling="nearby", **kw)

@@ -44,5 +44,13 @@ for style, rows in report["style_transfer"].items():
     assert all(r["protocol"] == "authors" for r in rows.values()), style
     assert rows["content_as_is"]["content"]["worst"] == 0.0 and rows["style_as_is"]["style"]["worst"] == 0.0
     assert all(r["style"]["mean"] > 0 for m, r in rows.items() if m != "style_as_is"), style
+gen = report["generation"]
+assert finite(gen), "generation metrics hold a NaN or inf"
+probe = gen["style_probe"]  # the ZeroEGGS probe comes with its controls, on the same folds
+for task in ("style", "content"):
+    for k in ("trained", "random_init", "raw_statistics"):
+        assert 0.0 <= probe[task][k]["accuracy"] <= 1.0 and probe[task][k]["ci95_half_width"] >= 0.0, (task, k)
+lk = gen["leakage"]["contrasts"]  # and the leakage contrast (same style vs another style)
+assert {"other_style - same_style_other_content", "zero - same_style_other_content"} <= set(lk), lk
 print(f"demo outputs ok: {len(gifs)} GIFs, {len(files)} BVH files (independent parser), metrics.json "
       f"({report['timings_s']['total_s']:.0f} s)")

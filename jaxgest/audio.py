@@ -5,11 +5,14 @@
 plus the log energy of each frame, interpolated to the motion rate with ``F = round(duration * fps)``
 frames. Files of any sample rate and channel count are read with soundfile and mixed down. Silent,
 constant and very short audio give finite features (the logs are floored); NaN/inf samples, unreadable
-files and empty audio raise :class:`~jaxgest.errors.AudioError` naming the file.
+files and empty audio raise :class:`~jaxgest.errors.AudioError` naming the file. By default the audio is
+first loudness-normalised to -20 LUFS (ITU-R BS.1770 integrated loudness, K-weighted and gated, in
+NumPy + scipy.signal, which librosa already depends on), as the authors' pipeline does with pyloudnorm;
+audio below the -70 LUFS gate (silence) is left as it is.
 
 References: Ghorbani et al. 2023, §3.1 and §4.1 (log-amplitude mel spectrogram, 80 channels, total frame
 energy, FFT Hanning window of 50 ms, hop 12.5 ms, resampled to the animation rate, normalised); SPEC §4
-(the authors' code: fmin 20 Hz, fmax 7600 Hz).
+(the authors' code: fmin 20 Hz, fmax 7600 Hz, pyloudnorm to -20 LUFS); ITU-R BS.1770-4 (loudness).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ HOP_S = 0.0125
 FMIN = 20.0
 FMAX = 7600.0
 LOG_FLOOR = 1e-5
-LOUDNESS_DBFS = -20.0  # RMS level of loudness-normalised audio (dB relative to full scale)
+LOUDNESS_LUFS = -20.0  # integrated loudness of loudness-normalised speech (ITU-R BS.1770, as the authors)
 
 
 def load_audio(path, sr: Optional[int] = None) -> tuple[np.ndarray, int]:
@@ -62,17 +65,76 @@ def _check_samples(y: np.ndarray, name: str) -> None:
         raise AudioError(f"{name}: audio contains NaN or inf samples")
 
 
-def normalize_loudness(y: np.ndarray, target_dbfs: float = LOUDNESS_DBFS) -> np.ndarray:
-    """Scale samples so their RMS level is ``target_dbfs`` dB full scale; silence is returned unchanged.
+def k_weighting(sr: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The two K-weighting biquads ``[(b, a), (b, a)]`` (a[0] = 1) for sample rate ``sr``.
 
-    The authors' data pipeline normalises the loudness of every recording before feature extraction
-    (SPEC §4); a plain RMS gain is used here (no perceptual weighting). References: SPEC §4.
+    Stage 1 is a high shelf (+4 dB above ~1.7 kHz, the head's acoustic effect), stage 2 the RLB
+    high-pass (~38 Hz). Both are designed for any rate from their analogue prototypes by the bilinear
+    transform (the constants of Brecht De Man's derivation, also used by pyloudnorm); at 48 kHz they equal
+    the coefficients tabulated in the recommendation. References: ITU-R BS.1770-4, §2.1, Tables 1-2.
+    """
+    def shelf(gain_db, q, fc):
+        k = np.tan(np.pi * fc / sr)
+        vh = 10.0 ** (gain_db / 20.0)
+        vb = vh ** 0.4996667741545416
+        a0 = 1.0 + k / q + k * k
+        return (np.array([(vh + vb * k / q + k * k), 2.0 * (k * k - vh), (vh - vb * k / q + k * k)]) / a0,
+                np.array([1.0, 2.0 * (k * k - 1.0) / a0, (1.0 - k / q + k * k) / a0]))
+
+    def high_pass(q, fc):
+        k = np.tan(np.pi * fc / sr)
+        a0 = 1.0 + k / q + k * k
+        return np.array([1.0, -2.0, 1.0]), np.array([1.0, 2.0 * (k * k - 1.0) / a0, (1.0 - k / q + k * k) / a0])
+
+    return [shelf(3.999843853973347, 0.7071752369554196, 1681.974450955533),
+            high_pass(0.5003270373238773, 38.13547087602444)]
+
+
+def integrated_loudness(y: np.ndarray, sr: float) -> float:
+    """Gated integrated loudness of mono samples in LUFS (-inf for silence).
+
+    K-weighting, mean squares over 400 ms blocks every 100 ms (one block of the whole signal when it is
+    shorter), an absolute gate at -70 LUFS and a relative gate 10 LU below the loudness of the blocks above
+    it. References: ITU-R BS.1770-4, §2 (eqs. 1-7); the authors' pipeline uses pyloudnorm, which
+    implements the same recommendation.
+    """
+    from scipy.signal import lfilter  # scipy comes with librosa
+
+    x = np.asarray(y, np.float64)
+    for b, a in k_weighting(sr):
+        x = lfilter(b, a, x)
+    block, step = int(round(0.4 * sr)), int(round(0.1 * sr))
+    if len(x) <= block:
+        z = np.array([np.mean(x ** 2)]) if len(x) else np.zeros(1)
+    else:
+        starts = np.arange(0, len(x) - block + 1, step)
+        c = np.concatenate([[0.0], np.cumsum(x ** 2)])
+        z = (c[starts + block] - c[starts]) / block
+
+    def lufs(ms):
+        return -0.691 + 10.0 * np.log10(ms) if ms > 0 else -np.inf
+
+    with np.errstate(divide="ignore"):
+        loud = -0.691 + 10.0 * np.log10(np.maximum(z, 1e-300))
+    kept = z[loud >= -70.0]
+    if kept.size == 0:
+        return -np.inf
+    kept = z[(loud >= -70.0) & (loud >= lufs(kept.mean()) - 10.0)]
+    return float(lufs(kept.mean()))
+
+
+def normalize_loudness(y: np.ndarray, sr: float, target_lufs: float = LOUDNESS_LUFS) -> np.ndarray:
+    """Scale samples so their integrated loudness (:func:`integrated_loudness`) is ``target_lufs``.
+
+    Audio whose loudness is below the absolute gate (silence, DC, near-silence) is returned unchanged, so
+    its features stay finite. The authors' data pipeline normalises every recording to -20 LUFS before
+    feature extraction. References: ITU-R BS.1770-4; SPEC §4.
     """
     y = np.asarray(y, np.float32)
-    rms = float(np.sqrt(np.mean(np.square(y, dtype=np.float64)))) if y.size else 0.0
-    if rms < 1e-8:
+    loud = integrated_loudness(y, sr) if y.size else -np.inf
+    if not np.isfinite(loud):
         return y
-    return (y * (10.0 ** (target_dbfs / 20.0) / rms)).astype(np.float32)
+    return (y * 10.0 ** ((target_lufs - loud) / 20.0)).astype(np.float32)
 
 
 def log_mel_energy(y: np.ndarray, sr: int) -> tuple[np.ndarray, float]:
@@ -93,12 +155,13 @@ def log_mel_energy(y: np.ndarray, sr: int) -> tuple[np.ndarray, float]:
 
 
 def speech_features(wav_path_or_array: Union[str, pathlib.Path, np.ndarray], sr: Optional[int] = None,
-                    fps: float = 60.0, *, loudness: bool = False) -> np.ndarray:
+                    fps: float = 60.0, *, loudness: bool = True) -> np.ndarray:
     """Speech features ``(F, 81)`` at ``fps`` frames per second (``F = round(duration * fps)``, >= 1).
 
     ``wav_path_or_array``: a path (``sr`` then optionally resamples) or a 1-D/2-D sample array (``sr``
-    required; 2-D arrays are ``(samples, channels)`` and mixed down). ``loudness=True`` first scales the
-    audio to :data:`LOUDNESS_DBFS` RMS (:func:`normalize_loudness`).
+    required; 2-D arrays are ``(samples, channels)`` and mixed down). ``loudness=True`` (default, as the
+    authors' pipeline) first scales the audio to :data:`LOUDNESS_LUFS` (:func:`normalize_loudness`);
+    ``loudness=False`` uses the samples as they are.
     References: Ghorbani et al. 2023, §3.1, §4.1.
     """
     if isinstance(wav_path_or_array, (str, pathlib.Path)):
@@ -115,7 +178,7 @@ def speech_features(wav_path_or_array: Union[str, pathlib.Path, np.ndarray], sr:
     if fps <= 0:
         raise AudioError(f"{name}: frame rate must be positive, got {fps}")
     if loudness:
-        y = normalize_loudness(y)
+        y = normalize_loudness(y, int(sr))
     feats, hop_s = log_mel_energy(y, int(sr))
     duration = len(y) / float(sr)
     frames = max(1, int(round(duration * fps)))

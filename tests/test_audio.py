@@ -75,14 +75,50 @@ def test_flac_stereo_44k(tmp_path):
     assert np.argmax(audio.speech_features(path, sr=16000)[30, :80]) == np.argmax(from_file[30, :80])
 
 
+def test_k_weighting_matches_the_bs1770_table_at_48k():
+    (b1, a1), (b2, a2) = audio.k_weighting(48000)
+    np.testing.assert_allclose(b1, [1.53512485958697, -2.69169618940638, 1.19839281085285], atol=1e-10)
+    np.testing.assert_allclose(a1, [1.0, -1.69065929318241, 0.73248077421585], atol=1e-10)
+    np.testing.assert_allclose(b2, [1.0, -2.0, 1.0])
+    np.testing.assert_allclose(a2, [1.0, -1.99004745483398, 0.99007225036621], atol=1e-10)
+
+
+@pytest.mark.parametrize("sr", [16000, 48000])
+def test_integrated_loudness_of_reference_signals(sr):
+    # BS.1770: a 0 dB FS 997 Hz sine in one channel reads -3.01 LKFS (K-weighting gain ~ 0 dB near 1 kHz).
+    assert audio.integrated_loudness(tone(997.0, 2.0, sr=sr, amp=1.0), sr) == pytest.approx(-3.01, abs=0.05)
+    # Any full-scale sine: -0.691 + 10 log10(1/2) + the K-weighting gain at its frequency, the gain taken
+    # from the recommendation's 48 kHz coefficients (at 16 kHz the bilinear warping moves it < 0.15 dB).
+    from scipy.signal import freqz
+
+    table = ([1.53512485958697, -2.69169618940638, 1.19839281085285], [1.0, -1.69065929318241, 0.73248077421585]), \
+        ([1.0, -2.0, 1.0], [1.0, -1.99004745483398, 0.99007225036621])
+    for f in (100.0, 4000.0):
+        gain = np.prod([abs(freqz(b, a, [f], fs=48000)[1][0]) for b, a in table])
+        expected = -0.691 + 10 * np.log10(0.5) + 20 * np.log10(gain)
+        got = audio.integrated_loudness(tone(f, 2.0, sr=sr, amp=1.0), sr)
+        assert got == pytest.approx(expected, abs=0.02 if sr == 48000 else 0.15), f
+    # Gating: 1 s of tone then 3 s of near-silence (-80 dB, under the absolute gate). Kept: the 7 blocks of
+    # 400 ms inside the tone and the 3 straddling its end (3/4, 1/2, 1/4 of the tone's energy, all above the
+    # relative gate): mean energy 8.5 / 10 of the tone's. Without gating it would read ~6 dB lower.
+    alone = audio.integrated_loudness(tone(997.0, 1.0, sr=sr, amp=0.1), sr)
+    y = np.concatenate([tone(997.0, 1.0, sr=sr, amp=0.1), tone(997.0, 3.0, sr=sr, amp=1e-4)])
+    assert audio.integrated_loudness(y, sr) == pytest.approx(alone + 10 * np.log10(0.85), abs=0.02)
+    assert audio.integrated_loudness(np.zeros(sr, np.float32), sr) == -np.inf
+
+
 def test_loudness_normalisation():
     y = tone(500.0)
-    z = audio.normalize_loudness(y)
-    assert 20 * np.log10(np.sqrt(np.mean(z.astype(np.float64) ** 2))) == pytest.approx(audio.LOUDNESS_DBFS, abs=1e-3)
-    np.testing.assert_array_equal(audio.normalize_loudness(np.zeros(100, np.float32)), 0.0)
-    a = audio.speech_features(y, sr=SR, loudness=True)
-    b = audio.speech_features(0.1 * y, sr=SR, loudness=True)
+    z = audio.normalize_loudness(y, SR)
+    assert audio.integrated_loudness(z, SR) == pytest.approx(audio.LOUDNESS_LUFS, abs=1e-3)
+    np.testing.assert_array_equal(audio.normalize_loudness(np.zeros(100, np.float32), SR), 0.0)
+    # On by default: features do not depend on the recording level; off, they do (20 dB: energy + 2 ln 10).
+    a = audio.speech_features(y, sr=SR)
+    b = audio.speech_features(0.1 * y, sr=SR)
     np.testing.assert_allclose(a, b, atol=1e-3)
+    raw_a = audio.speech_features(y, sr=SR, loudness=False)
+    raw_b = audio.speech_features(0.1 * y, sr=SR, loudness=False)
+    assert np.median(raw_a[:, -1] - raw_b[:, -1]) == pytest.approx(2 * np.log(10.0), abs=0.05)  # log energy
 
 
 def test_errors_name_the_file(tmp_path):

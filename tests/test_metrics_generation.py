@@ -11,6 +11,7 @@ from jaxgest.errors import AudioError, DataError
 from jaxgest.metrics import (
     beat_alignment,
     frechet_distance,
+    frechet_distance_from_statistics,
     gaussian_smooth,
     hand_speed,
     kinematic_beats,
@@ -146,7 +147,18 @@ def test_frechet_distance_properties():
     assert frechet_distance(a, a) == pytest.approx(0.0, abs=1e-9)
     shift = np.array([1.0, -2.0, 0.0, 0.5])
     assert frechet_distance(a, a + shift) == pytest.approx(float(shift @ shift), rel=1e-9)
-    assert frechet_distance(a[:3], a[3:6]) >= 0.0  # rank-deficient covariances are fine
+    # closed form for Gaussians with diagonal covariances: |mu_a - mu_b|^2 + sum (sqrt(var_a) - sqrt(var_b))^2,
+    # also when covariances are singular (zero variances)
+    va, vb = np.array([4.0, 1.0, 0.0, 9.0]), np.array([1.0, 1.0, 2.25, 0.0])
+    mu_a, mu_b = np.array([0.0, 1.0, 2.0, 3.0]), np.array([1.0, 1.0, 0.0, 3.0])
+    expected = float(np.sum((mu_a - mu_b) ** 2) + np.sum((np.sqrt(va) - np.sqrt(vb)) ** 2))  # 5 + 1 + 2.25 + 9
+    assert frechet_distance_from_statistics(mu_a, np.diag(va), mu_b, np.diag(vb)) == pytest.approx(expected)
+    assert expected == pytest.approx(17.25)
+    # and from samples: two large Gaussian samples, means 3 apart in one dim, stds 1 and 2 in another
+    rng2 = np.random.default_rng(18)
+    x = rng2.normal(size=(200_000, 2))
+    y = rng2.normal(size=(200_000, 2)) * [1.0, 2.0] + [3.0, 0.0]
+    assert frechet_distance(x, y) == pytest.approx(9.0 + 1.0, rel=0.01)
     with pytest.raises(DataError):
         frechet_distance(a[:1], a)
     with pytest.raises(DataError):

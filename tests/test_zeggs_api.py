@@ -158,16 +158,23 @@ def test_blend_weights(trained, clips):
     e1, e2 = (model.style_embedding([s], seed=5) for s in styles)
     assert np.abs(e1 - e2).max() > 1e-4  # two different clips, two different embeddings
     np.testing.assert_array_equal(model.style_embedding(styles, weights=[1, 0], seed=5), e1)
+    # Weights are used as given: (2, 0) scales the first embedding (paper §5.2.1), (0, 0) is e = 0;
+    # normalize_weights=True divides by their sum (the old behaviour).
+    np.testing.assert_array_equal(model.style_embedding(styles, weights=[2, 0], seed=5), 2 * e1)
+    np.testing.assert_array_equal(model.style_embedding(styles, weights=[0, 0], seed=5), 0 * e1)
+    np.testing.assert_array_equal(model.style_embedding(styles, weights=[2, 0], seed=5, normalize_weights=True), e1)
     half = model.style_embedding(styles, weights=[0.5, 0.5], seed=5, temperature=0.0)
     mu1, mu2 = (model.style_embedding([s], temperature=0.0) for s in styles)
     np.testing.assert_allclose(half, 0.5 * (mu1 + mu2), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(model.style_embedding(styles, weights=[1, 3], temperature=0.0, normalize_weights=True),
+                               0.25 * mu1 + 0.75 * mu2, rtol=1e-5, atol=1e-6)
     first = generate(audio, styles, workdir=work, weights=[1, 0], seed=5)
     alone = generate(audio, styles[:1], workdir=work, seed=5)
     np.testing.assert_array_equal(first.rotations, alone.rotations)
     with pytest.raises(JaxgestError, match="2 weight"):
         generate(audio, styles[:1], workdir=work, weights=[0.5, 0.5])
     with pytest.raises(JaxgestError, match="positive sum"):
-        generate(audio, styles, workdir=work, weights=[0, 0])
+        generate(audio, styles, workdir=work, weights=[0, 0], normalize_weights=True)
     with pytest.raises(JaxgestError, match="finite"):
         generate(audio, styles, workdir=work, weights=[np.nan, 1])
 
@@ -288,7 +295,7 @@ def test_cli_generate_pca_and_errors(trained, tmp_path):
     assert bvh.load(out).num_frames > 1
     bad = [
         (["--weights", "1,1,1"], "weight"),
-        (["--weights", "0,0"], "positive sum"),
+        (["--weights", "0,0", "--normalize-weights"], "positive sum"),
         (["--pca-edit", "42=1"], "component 42 does not exist"),
         (["--pca-edit", "zero"], "COMPONENT=DELTA"),
     ]
@@ -331,3 +338,36 @@ def test_style_example_prefers_another_content_of_the_same_style():
     assert style_example(clip, [other_style, same_content, other_content]) is other_content
     assert style_example(clip, [other_style, same_content]) is same_content  # another take, same content
     assert style_example(clip, [other_style, clip]) is clip  # nothing else of this style: the clip itself
+
+
+def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, tmp_path):
+    """A model trained before speech loudness normalisation existed is fed unnormalised speech."""
+    import shutil
+
+    from jaxgest.zeggs.inference import load_model
+
+    _, work, _ = trained
+    assert load_model(work).cfg.loudness is True  # the default of new models
+    old = tmp_path / "old"
+    shutil.copytree(work, old)
+    meta = json.loads((old / "config.json").read_text())
+    del meta["config"]["loudness"]
+    (old / "config.json").write_text(json.dumps(meta))
+    assert load_model(old).cfg.loudness is False
+
+
+def test_train_cli_no_loudness_flag_reaches_the_config(monkeypatch):
+    from jaxgest.cli import main
+    from jaxgest.zeggs import train as ztrain
+
+    seen = {}
+
+    def fake_train(data, workdir, **kw):
+        seen.update(kw)
+        return {"final": {}, "start_step": 1, "steps": 1}
+
+    monkeypatch.setattr(ztrain, "train", fake_train)
+    assert main(["zeggs", "train", "--workdir", "w", "--no-loudness"]) == 0
+    assert seen["overrides"] == {"loudness": False}
+    assert main(["zeggs", "train", "--workdir", "w"]) == 0
+    assert seen["overrides"] == {}

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import pytest
 import soundfile as sf
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from jaxgest.audio import FEATURE_DIM, FeatureStats, load_audio, speech_features
 from jaxgest.errors import AudioError, DataError
@@ -78,6 +82,76 @@ def test_sequences_and_batches(synth_dir):
     assert not np.array_equal(b["pose"], other["pose"])
     with pytest.raises(DataError, match="no clip is long enough"):
         data.batch(0, seed=0, batch=2, window=10_000, style_min=64, style_max=128)
+
+
+def _seqs(lengths, styles, clips):
+    return [types.SimpleNamespace(frames=n, style=s, clip=c) for n, s, c in zip(lengths, styles, clips)]
+
+
+@settings(max_examples=60, deadline=None)
+@given(frames=st.integers(40, 400), window=st.integers(4, 64), smin=st.integers(4, 64), extra=st.integers(0, 64),
+       seed=st.integers(0, 2**31 - 1))
+def test_style_window_modes(frames, window, smin, extra, seed):
+    smax = smin + extra
+    rng = np.random.default_rng(seed)
+    seqs = _seqs([frames, frames + 7, 300], ["a", "a", "b"], ["x.bvh", "y.bvh", "z.bvh"])
+    if frames >= window + smin:  # disjoint: the target lies outside the style window
+        t0, (j, s0, m) = D.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
+                                        sampling="disjoint")
+        assert j == 0 and 0 <= t0 <= frames - window and smin <= m <= smax and 0 <= s0 <= frames - m
+        assert s0 + m <= t0 or s0 >= t0 + window
+    if frames >= max(window, smin):  # overlap (the paper): the style window contains the target
+        t0, (j, s0, m) = D.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
+                                        sampling="overlap")
+        assert j == 0 and 0 <= s0 <= frames - m and m <= max(smax, window)
+        assert (s0 <= t0 and t0 + window <= s0 + m) if m >= window else (t0 <= s0 and s0 + m <= t0 + window)
+        # other-clip: another clip of the same style ("y.bvh"), never the target's own clip or another style
+        t0, (j, s0, m) = D.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
+                                        sampling="other-clip")
+        assert j == 1 and smin <= m <= min(smax, frames + 7) and 0 <= s0 <= frames + 7 - m
+    # the only clip of its style: other-clip falls back to disjoint
+    t0, (j, s0, m) = D.style_window(seqs, 2, rng, window=window, style_min=smin, style_max=smax,
+                                    sampling="other-clip")
+    assert j == 2 and (s0 + m <= t0 or s0 >= t0 + window)
+
+
+def _find(norm, block):
+    """Start frames ``u`` where ``norm[u:u + len(block)]`` equals ``block`` (first-row match, then the rest)."""
+    n = len(block)
+    cand = np.flatnonzero(np.abs(norm[:len(norm) - n + 1] - block[0]).max(axis=1) < 1e-5)
+    return [int(u) for u in cand if np.abs(norm[u:u + n] - block).max() < 1e-5]
+
+
+def test_batch_sampling_modes(synth_dir, tmp_path):
+    bvhs = sorted(synth_dir.glob("*.bvh"))  # relabelled: two clips of style "a", one of style "b"
+    (tmp_path / "manifest.csv").write_text("path,content,style,audio\n" + "".join(
+        f"{p.resolve()},c{i},{'aab'[i]},{p.with_suffix('.wav').resolve()}\n" for i, p in enumerate(bvhs)))
+    data = D.load(tmp_path, fps=60, speeds=(1.0,))
+    norms = [data.pose_stats.normalize(s.pose) for s in data.sequences]
+    kw = dict(seed=1, batch=6, window=64, style_min=64, style_max=96)
+    for mode in D.SAMPLING_MODES:
+        b = data.batch(2, sampling=mode, **kw)
+        for r in range(6):  # locate the target and its style window among the sequences' frames
+            target = b["pose"][r]
+            style = b["style"][r, :int(b["style_mask"][r].sum())]
+            own = [(i, u) for i in range(len(norms)) for u in _find(norms[i], target)]
+            assert len(own) == 1
+            i, t0 = own[0]
+            s = data.sequences[i]
+            hits = _find(norms[i], style)
+            alone = mode == "other-clip" and s.style == "b"  # no other clip of its style: disjoint
+            if mode == "overlap":
+                assert any(u <= t0 and t0 + 64 <= u + len(style) for u in hits)
+            elif mode == "disjoint" or alone:
+                assert hits and all(u + len(style) <= t0 or u >= t0 + 64 for u in hits)
+            else:  # another clip of the same style
+                assert not hits
+                src = [o for o, x in zip(data.sequences, norms) if o.clip != s.clip and _find(x, style)]
+                assert src and all(o.style == s.style for o in src)
+    with pytest.raises(DataError, match="unknown style sampling"):
+        data.batch(0, sampling="nearby", **kw)
+    with pytest.raises(DataError, match="disjoint"):  # 5 s clips: no room for 64 + 300 frames apart
+        data.batch(0, seed=0, batch=2, window=64, style_min=300, style_max=300, sampling="disjoint")
 
 
 def test_folder_without_audio_is_rejected(tmp_path, synth_dir):

@@ -125,6 +125,47 @@ def test_world_losses_zero_for_identical_and_facing_sensitive():
     assert float(t2["facing"].min()) > 0.1 and float(t2["local_position"].max()) == 0.0
 
 
+# A 5-joint rig for the tiny preset: a static wrapper root, hips, spine, and two arms on the spine.
+CHAIN_RIG = {"fk_parents": (-1, 0, 1, 2, 2), "fk_offsets": (0, 0, 0, 0, 90, 0, 0, 20, 0, 15, 5, 0, -15, 5, 0),
+             "fk_translated": (0, 1)}
+
+
+def test_fk_position_terms_follow_the_rendered_rotations():
+    """With the rig in the config, position terms see the rotations (what is rendered), not the
+    predicted position channels of joints below the hips, which only `predicted_position` sees."""
+    cfg = CFG.replace(**CHAIN_RIG)
+    rng = np.random.default_rng(3)
+    j = cfg.num_joints
+    lay = cfg.layout
+    q = R.quat_normalize(rng.normal(size=(2, 4, j, 4)))
+    pose = np.zeros((2, 4, P), np.float32)
+    pose[..., lay.local_rotations] = R.quat_to_6d(q).reshape(2, 4, 6 * j)
+    pose[..., lay.local_positions] = rng.normal(size=(2, 4, 3 * j))
+    pose = jnp.asarray(pose)
+    rp = jnp.zeros((2, 4, 3))
+    rr = jnp.zeros((2, 4, 4)).at[..., 0].set(1.0)
+    terms = L.reconstruction_terms(pose, rp, rr, pose, rp, rr, cfg=cfg)
+    for k, v in terms.items():
+        np.testing.assert_allclose(v, 0.0, atol=1e-5, err_msg=k)
+    # An arm's position channels moved: only predicted_position sees it.
+    moved = pose.at[..., 3 * 3:3 * 4].add(10.0)
+    t = L.reconstruction_terms(moved, rp, rr, pose, rp, rr, cfg=cfg)
+    assert float(t["predicted_position"].min()) > 1.0
+    for k in ("local_position", "world_position", "fd_local_position", "fd_world_position"):
+        np.testing.assert_allclose(t[k], 0.0, atol=1e-5, err_msg=k)
+    # The spine turned: both arms move (local and world position terms), predicted_position does not.
+    turned = np.asarray(pose).copy()
+    q2 = q.copy()
+    q2[..., 2, :] = R.quat_mul(R.euler_to_quat(np.array([0.0, 0.0, 40.0]), "XYZ"), q[..., 2, :])
+    turned[..., lay.local_rotations] = R.quat_to_6d(q2).reshape(2, 4, 6 * j)
+    t = L.reconstruction_terms(jnp.asarray(turned), rp, rr, pose, rp, rr, cfg=cfg)
+    assert float(t["local_position"].min()) > 0.5 and float(t["world_position"].min()) > 0.5
+    np.testing.assert_allclose(t["predicted_position"], 0.0, atol=1e-6)
+    # Without the rig (the old behaviour) the position terms read the channels and predicted_position is 0.
+    t = L.reconstruction_terms(moved, rp, rr, pose, rp, rr, cfg=CFG)
+    assert float(t["local_position"].min()) > 1.0 and float(t["predicted_position"].max()) == 0.0
+
+
 def _gen_inputs(B=2, T=5, seed=0):
     rng = np.random.default_rng(seed)
     q = np.zeros((B, 4), np.float32)

@@ -18,22 +18,19 @@ mkdir -p "$OUT"
 declare -A WALL
 t() { date +%s; }
 
-# A mid-size model between the tiny preset and the paper (~25.5 M params): GRU 128, D_S 16, D_e 16,
-# compiled with XLA's default optimisation (the tiny preset's level 0 compiles faster but runs slower).
-MID=(--override gru_hidden=128 --override init_hidden=128 --override speech_channels=32,32
-     --override speech_kernels=3,15 --override speech_embedding=16 --override style_hidden=64
-     --override style_embedding=16 --override style_heads=2 --override batch_size=16 --override window=64
-     --override style_window_min=64 --override style_window_max=128 --override kl_center=1000
-     --override kl_growth=0.005 --override xla_opt_level=none)
+# The `small` preset: a mid-size model between `tiny` and the paper (~25.5 M params): GRU 128, D_S 16, D_e 16,
+# style windows 64-128 frames apart from the 64-frame target (style_sampling=disjoint), XLA's default optimisation.
+MID=(--preset small)
+EXTRA=(${TRAIN_OVERRIDES:-})  # e.g. TRAIN_OVERRIDES="--override style_sampling=overlap" for the paper's sampling
 
 # 1. data: 6 contents x 7 styles, 10 s each, 60 fps, 21 joints, speech-like WAV
 s=$(t); "${J[@]}" synth --out "$OUT/data" --seed $SEED > /dev/null; WALL[synth]=$(( $(t) - s ))
 
 # 2. train (resumes if $OUT/work has a checkpoint)
-s=$(t); "${J[@]}" zeggs train --data "$OUT/data" --workdir "$OUT/work" --preset tiny --steps "$STEPS" --seed $SEED \
-    "${MID[@]}" | tee -a "$OUT/train.log"; WALL[train]=$(( $(t) - s ))
+s=$(t); "${J[@]}" zeggs train --data "$OUT/data" --workdir "$OUT/work" --steps "$STEPS" --seed $SEED \
+    "${MID[@]}" "${EXTRA[@]}" | tee -a "$OUT/train.log"; WALL[train]=$(( $(t) - s ))
 
-# 3. evaluation: style probe on held-out clips, BeatAlign vs shuffled onsets, Fréchet distance
+# 3. evaluation: probes with controls, leakage report, BeatAlign vs shuffled onsets, Fréchet distance
 s=$(t); "${J[@]}" zeggs evaluate --workdir "$OUT/work" --data "$OUT/data" --json "$OUT/eval.json" --seed $SEED \
     | tee "$OUT/eval.md"; WALL[evaluate]=$(( $(t) - s ))
 
@@ -69,15 +66,15 @@ done
     --max-seconds 6 --fps 12 > /dev/null
 WALL[blend_pca]=$(( $(t) - s ))
 
-# 5b. probe controls (raw window statistics, random-init encoder) and numbers for the blend / PCA outputs
+# 5b. numbers for the blend / PCA outputs (hand speed and height)
 "$PY" experiments/zeggs_synthetic/extra_measures.py --workdir "$OUT/work" --data "$OUT/data" --out-dir "$OUT" \
     --json "$OUT/extra.json" > /dev/null
 
 # 6. overfit on the one real ZEGGS clip (68 s, 75 joints, 30 fps, 16 kHz), then sanity measures
 if [ -f "$ZEGGS_DIR/067_Speech_2_x_1_0.bvh" ]; then
   s=$(t)
-  "${J[@]}" zeggs train --data "$ZEGGS_DIR" --workdir "$OUT/zeggs_overfit" --preset tiny --steps "$OVERFIT_STEPS" \
-      --seed $SEED "${MID[@]}" --override batch_size=8 | tee -a "$OUT/overfit_train.log"
+  "${J[@]}" zeggs train --data "$ZEGGS_DIR" --workdir "$OUT/zeggs_overfit" --steps "$OVERFIT_STEPS" \
+      --seed $SEED "${MID[@]}" "${EXTRA[@]}" --override batch_size=8 | tee -a "$OUT/overfit_train.log"
   "$PY" experiments/zeggs_synthetic/overfit_check.py --workdir "$OUT/zeggs_overfit" --data "$ZEGGS_DIR" \
       --json "$OUT/overfit.json" --out-bvh "$OUT/overfit_generated.bvh"
   "${J[@]}" render "$ZEGGS_DIR/067_Speech_2_x_1_0.bvh" "$OUT/overfit_generated.bvh" --out "$OUT/overfit_real.gif" \
@@ -102,8 +99,10 @@ def train_wall(log):  # training seconds summed over the invocations that traine
     return round(sum(float(w) for n, s0, w in rows if int(s0) < int(n)), 1)
 res = {"seed": 0, "steps": steps, "overfit_steps": osteps, "wall_s_this_invocation": walls,
        "training_wall_s": {"synthetic": train_wall("train.log"), "overfit": train_wall("overfit_train.log")},
+       "preset": cfg["preset"],
        "config": {k: cfg["config"][k] for k in ("gru_hidden", "init_hidden", "speech_channels", "speech_kernels",
-                  "speech_embedding", "style_hidden", "style_embedding", "batch_size", "window", "fps")},
+                  "speech_embedding", "style_hidden", "style_embedding", "batch_size", "window", "fps",
+                  "style_window_min", "style_window_max", "style_sampling", "kl_center", "kl_growth", "kl_cap")},
        "final_train_metrics": {k: last[k] for k in ("step", "loss", "recon", "kl", "steps_per_s")},
        "first_logged_train_metrics": {k: lines[0][k] for k in ("step", "loss", "recon", "kl")},
        "evaluate": json.loads((out / "eval.json").read_text()),

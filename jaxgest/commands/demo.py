@@ -196,10 +196,19 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
         generated.append(m)
     render_gif(generated, results / "speech_styles.gif", titles=[STYLES[0], STYLES[1], "blend 50/50"],
                max_seconds=plan["gif_seconds"])
-    try:
-        probe = zev.probe(zeggs, load_folder(data), seed=seed, window_s=2.0)
+    clips = load_folder(data)
+    try:  # the probe beside its controls (random-init encoder, raw window statistics) on the same folds
+        probe = zev.probe(zeggs, clips)
+        probe = {task: {k: {"accuracy": v["accuracy"], "ci95_half_width": v["clip_mean"]["ci95_half_width"],
+                            "chance": v["chance"]} for k, v in probe[task].items() if k != "trained_minus"}
+                 for task in ("style", "content")} | {"protocol": probe["protocol"]}
     except DataError as e:
         probe = {"skipped": str(e)}
+    try:  # the leakage contrast: does a same-style example of other content beat another style's?
+        lk = zev.leakage(zeggs, [c for c in clips if c.audio is not None])
+        leakage = {"mean_loss": lk["mean_loss"], "contrasts": lk["contrasts"], "clips": lk["clips"]}
+    except DataError as e:
+        leakage = {"skipped": str(e)}
     timings["generate_s"] = time.perf_counter() - t
 
     # ---- (c) chained pipeline: speech -> ZEGGS (neutral) -> TGST (energetic)
@@ -227,7 +236,7 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
         "tgst_training": {k: tgst_summary[k] for k in ("ae", "transformer", "windows")},
         "zeggs_training": {k: v for k, v in zeggs_summary.items() if k in ("steps", "final", "wall_s")},
         "style_transfer": transfer,
-        "generation": {"beat_alignment": gen_metrics, "style_probe": probe},
+        "generation": {"beat_alignment": gen_metrics, "style_probe": probe, "leakage": leakage},
         "pipeline": pipe,
         "timings_s": timings,
         "notes": {
@@ -268,9 +277,26 @@ def summary_table(report: dict) -> str:
         else:
             lines.append(f"| {label} | n/a | {b.get('skipped', '')} |")
     p = report["generation"]["style_probe"]
-    if "accuracy" in p:
-        lines.append(f"\nstyle probe accuracy of the ZeroEGGS embeddings: {p['accuracy']:.2f} "
-                     f"(chance {p['chance']:.2f}, {p['test_windows']} held-out windows)")
+    if "style" in p:
+        lines += ["", "ZeroEGGS style embeddings: linear probes (style: leave-one-content-out, content: "
+                  "leave-one-style-out; ± 95 % CI over clips)", "",
+                  "| probe | trained encoder | control: random init | control: raw window statistics | chance |",
+                  "|---|---:|---:|---:|---:|"]
+        for task in ("style", "content"):
+            t = p[task]
+            lines.append(f"| {task} | " + " | ".join(
+                f"{t[k]['accuracy']:.2f} ± {t[k]['ci95_half_width']:.2f}" for k in ("trained", "random_init",
+                                                                                   "raw_statistics"))
+                + f" | {t['trained']['chance']:.2f} |")
+    lk = report["generation"].get("leakage", {})
+    if "contrasts" in lk:
+        lines += ["", "ZeroEGGS leakage contrast (reconstruction loss of fixed targets; positive = the second "
+                  "source is better; mean ± SE over clips)", ""]
+        for name in ("other_style - same_style_other_content", "zero - same_style_other_content"):
+            d = lk["contrasts"].get(name)
+            if d:
+                z = "n/a" if d["z"] is None else f"{d['z']:.1f}"
+                lines.append(f"- {name.replace('_', ' ')}: {d['mean']:+.4f} ± {d['standard_error']:.4f} (z = {z})")
     t = report["timings_s"]
     lines.append(f"timings: data {t['data_s']:.0f} s, TGST training {t['tgst_train_s']:.0f} s, ZeroEGGS training "
                  f"{t['zeggs_train_s']:.0f} s, transfer {t['transfer_s']:.0f} s, generation {t['generate_s']:.0f} s, "

@@ -17,7 +17,7 @@ def register(subparsers) -> None:
     t.add_argument("--data", default=None, help="folder: ZEGGS layout or manifest.csv with audio "
                    "(default: the built-in synthetic data, written to W/synthetic-data)")
     t.add_argument("--workdir", required=True, help="run folder (checkpoints, stats, metrics.jsonl)")
-    t.add_argument("--preset", default="tiny", choices=("tiny", "paper"))
+    t.add_argument("--preset", default="tiny", choices=("tiny", "small", "paper"))
     t.add_argument("--steps", type=int, default=None, help="total training steps (default: tiny 300)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
@@ -26,13 +26,18 @@ def register(subparsers) -> None:
     t.add_argument("--log-every", type=int, default=25, help="metrics.jsonl line every N steps")
     t.add_argument("--override", action="append", default=[], metavar="FIELD=VALUE",
                    help="replace a config field of the preset, e.g. gru_hidden=128 or speech_channels=32,32")
+    t.add_argument("--no-loudness", action="store_true",
+                   help="use the speech as recorded (default: loudness-normalised to -20 LUFS, as the authors)")
     t.set_defaults(func=_train)
 
     g = sub.add_parser("generate", help="gestures for a speech file in the style of example clip(s)")
     g.add_argument("--workdir", required=True)
     g.add_argument("--audio", required=True, help="WAV/FLAC speech (any sample rate or channel count)")
     g.add_argument("--style", action="append", required=True, help="style example BVH (repeat to blend)")
-    g.add_argument("--weights", default=None, help="blend weights, comma-separated, one per --style")
+    g.add_argument("--weights", default=None, help="blend weights, comma-separated, one per --style, used as "
+                   "given (2,0 doubles the first style's embedding; default: the average)")
+    g.add_argument("--normalize-weights", action="store_true",
+                   help="divide the blend weights by their sum (which must then be positive)")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--temperature", type=float, default=1.0)
     g.add_argument("--pca-edit", action="append", default=[], metavar="K=DELTA",
@@ -60,7 +65,7 @@ def _train(args) -> int:
 
     r = train(args.data, args.workdir, preset=args.preset, steps=args.steps,
               seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-              overrides=parse_overrides(args.override))
+              overrides={**parse_overrides(args.override), **({"loudness": False} if args.no_loudness else {})})
     final = r["final"]
     if r["start_step"] >= r["steps"]:
         if r["start_step"] == 0:
@@ -130,7 +135,7 @@ def _generate(args) -> int:
         raise JaxgestError(f"{args.audio}: no such audio file")
     model = load_model(args.workdir)
     motion = model.generate(args.audio, styles, weights=weights, seed=args.seed, temperature=args.temperature,
-                            pca_edits=edits, name=out.stem)
+                            pca_edits=edits, name=out.stem, normalize_weights=args.normalize_weights)
     bvh.save(motion, out)
     print(f"zeggs: wrote {out} ({motion.num_frames} frames at {motion.fps:g} fps, "
           f"{motion.skeleton.num_joints} joints)")

@@ -15,12 +15,27 @@ Presets (``get_config(name)``):
   compiles with XLA's backend optimisation level 0 (``xla_opt_level=0``: the train step compiles ~2.5x
   faster, runs ~3x slower, which pays off below a few thousand steps); override it with
   ``xla_opt_level=None`` (``--override xla_opt_level=none``) for long runs of a widened tiny model.
+* ``"small"`` -- the mid-size model of ``experiments/zeggs_synthetic`` (~0.6 M parameters on the 21-joint
+  synthetic rig): speech convs 32/32 (kernels 3, 15), D_S = 16; style encoder conv 64, D_e = 16, 2 heads;
+  GRU 2 x 128, initializer 128; batch 16, T = 64, style windows 64-128 frames; RAdam 1e-3 (x0.995 every
+  100 steps); KL weight logistic (centre 1000 steps, growth 0.005, cap 0.2); XLA's default optimisation.
+  Trains 8k steps on the synthetic data in ~10-30 min on 2 CPU cores.
 
 Where the paper's text and the authors' public code differ (kept as in the code unless stated):
 the first speech conv has kernel 3 in the paper (1 in the code; we follow the paper and SPEC); the
 style encoder's second conv outputs 2 D_e channels and the FFT block runs at that width (the code; the
 paper's "64 channels" for the FFT convs is D_e, the code's projection to 2 D_e *is* that second conv),
 so ``style_projection=False`` in the paper preset adds no extra layer.
+
+Style sampling (``style_sampling``; SPEC §4): the paper draws the training style window so that it
+*contains* the target window (``"overlap"``), which lets the style embedding describe the target's own
+gestures (content) instead of the style. SPEC §4 allows a window apart from the target if it is measured
+against the paper's; the default ``"disjoint"`` takes it from the same clip but not overlapping the target
+(``"other-clip"``: another clip with the same style label). The three were compared on identical data and
+steps with ``jaxgest zeggs evaluate``'s leakage report and probes (``experiments/zeggs_synthetic``, 1,200
+steps of the ``small`` preset): ``"disjoint"`` is the one where a same-style example of other content
+reconstructs better than another style's (z 4.5) and than e = 0, and the style probe clears its
+random-init control; with ``"overlap"`` the target's own window dominates.
 
 Every config is a frozen (hashable, jit-static) dataclass of JSON-friendly fields: ``cfg.to_dict()`` is
 stored with checkpoints and :func:`config_from_dict` rebuilds it.
@@ -101,6 +116,17 @@ class ZeggsConfig:
     # --- compilation ----------------------------------------------------------------------------------
     xla_opt_level: Optional[int] = None  # XLA backend optimisation level of every jitted function (None:
     #   XLA's default). 0 compiles ~2.5x faster and runs ~3x slower: right for tiny models and short runs.
+    # fidelity
+    loudness: bool = True  # speech loudness-normalised to -20 LUFS (ITU-R BS.1770) before features, as the authors
+    fk_parents: tuple[int, ...] = ()  # the rig's parents: position terms by FK of the predicted rotations (() : on
+    #   the predicted root-frame positions, the old behaviour); set from the data by train (features.fk_fields)
+    fk_offsets: tuple[float, ...] = ()  # the rig's rest offsets, J * 3 (file units)
+    fk_translated: tuple[int, ...] = ()  # joints whose translation the pose sets (root and its chain to the hips)
+    w_predicted_position: float = 1.0  # with FK: the predicted root-frame position channels themselves (read back)
+    # style sampling / evaluation
+    style_sampling: str = "disjoint"  # where a training style window comes from (jaxgest.zeggs.data.style_window):
+    #   "overlap" (the paper: contains the target), "disjoint" (same clip, apart from the target) or
+    #   "other-clip" (another clip of the same style label); see the module docstring
 
     def __post_init__(self):
         if len(self.speech_channels) != len(self.speech_kernels):
@@ -113,6 +139,8 @@ class ZeggsConfig:
             raise ValueError(f"kl_reduction must be 'mean' or 'sum', got {self.kl_reduction!r}")
         if not self.style_window_min <= self.style_window_max:
             raise ValueError("style_window_min must be <= style_window_max")
+        if self.style_sampling not in ("overlap", "disjoint", "other-clip"):
+            raise ValueError(f"style_sampling must be 'overlap', 'disjoint' or 'other-clip', got {self.style_sampling!r}")
 
     @property
     def layout(self) -> PoseLayout:
@@ -150,6 +178,12 @@ PRESETS: dict[str, ZeggsConfig] = {
         style_hidden=16, style_embedding=8, style_heads=2, gru_hidden=32, init_hidden=32, kl_center=50.0,
         kl_growth=0.1, learning_rate=1e-3, lr_decay_steps=100, batch_size=4, window=32, style_window_min=32,
         style_window_max=48, style_min_frames=4, xla_opt_level=0,
+    ),
+    "small": ZeggsConfig(
+        name="small", num_joints=21, speech_channels=(32, 32), speech_kernels=(3, 15), speech_embedding=16,
+        style_hidden=64, style_embedding=16, style_heads=2, gru_hidden=128, init_hidden=128, kl_center=1000.0,
+        kl_growth=0.005, learning_rate=1e-3, lr_decay_steps=100, batch_size=16, window=64, style_window_min=64,
+        style_window_max=128, style_min_frames=4, xla_opt_level=None,
     ),
 }
 

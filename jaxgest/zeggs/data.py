@@ -14,8 +14,16 @@ built-in synthetic data) to fixed-size training batches (paper 001 §4.1, §4.3)
   (``NormStats``), saved beside the model;
 * a batch (pure function of ``(seed, step)``, so a resumed run sees the same data) holds ``batch`` target
   windows of ``window`` frames and, for each, a style window of a random length in
-  ``[style_min, style_max]`` frames from the same clip that contains the target window (padded to
-  ``style_max`` with a mask).
+  ``[style_min, style_max]`` frames (padded to ``style_max`` with a mask), drawn by one of the
+  ``SAMPLING_MODES`` (:func:`style_window`):
+
+  - ``overlap`` (the paper, §4.3): from the same sequence, containing the target window;
+  - ``disjoint``: from the same sequence, not overlapping the target window (before or after it);
+  - ``other-clip``: from a sequence of *another* clip with the same style label (any of its mirrored /
+    sped-up variants); a sequence whose style has no other clip falls back to ``disjoint``.
+
+  SPEC §4 allows a style window apart from the target if it is measured against the paper's; the
+  comparison (leakage report, probes) is in ``experiments/zeggs_synthetic/README.md``.
 
 Batch layout (float32 unless said)::
 
@@ -45,6 +53,7 @@ from jaxgest.motion.datasets import Clip, NormStats, load_clip_audio, load_folde
 from jaxgest.zeggs import features as Fe
 
 LENGTH_TOLERANCE_S = 1.0
+SAMPLING_MODES = ("overlap", "disjoint", "other-clip")
 SPEEDS = (0.9, 1.0, 1.1)
 WORLD_FORWARD = np.array([0.0, 0.0, 1.0])
 
@@ -60,6 +69,8 @@ class Sequence_:
     root_position: np.ndarray  # (F, 3)
     root_rotation: np.ndarray  # (F, 4)
     facing: np.ndarray  # (3,) world facing target of the clip
+    clip: str = ""  # the source clip (same for its mirrored / sped-up variants)
+    content: str = ""  # the source clip's content label
 
     @property
     def frames(self) -> int:
@@ -87,14 +98,14 @@ def _time_resample(x: np.ndarray, frames: int) -> np.ndarray:
 
 
 def clip_sequences(clip: Clip, *, fps: float, mirror: bool = True, speeds: Sequence[float] = SPEEDS,
-                   min_frames: int = 2) -> list[Sequence_]:
+                   min_frames: int = 2, loudness: bool = True) -> list[Sequence_]:
     """All training sequences of one clip (original, mirrored; each at every speed)."""
     from jaxgest.audio import speech_features
 
     if clip.audio is None:
         raise DataError(f"{clip.path}: no audio next to this clip (ZeroEGGS trains on speech + motion)")
     samples, sr = load_clip_audio(clip)
-    speech = np.asarray(speech_features(samples, sr=sr, fps=fps), np.float32)
+    speech = np.asarray(speech_features(samples, sr=sr, fps=fps, loudness=loudness), np.float32)
     out = []
     variants = [("", clip.motion)] + ([("_mirror", K.mirror(clip.motion))] if mirror else [])
     for suffix, motion in variants:
@@ -117,7 +128,8 @@ def clip_sequences(clip: Clip, *, fps: float, mirror: bool = True, speeds: Seque
             out.append(Sequence_(
                 name=f"{clip.path.stem if clip.path else clip.content}{suffix}@{speed:g}",
                 style=clip.style, pose=pose[:n], speech=sp[:n], root_position=feats["root_position"][:n],
-                root_rotation=rot, facing=clip_facing(rot)))
+                root_rotation=rot, facing=clip_facing(rot), clip=str(clip.path) if clip.path else clip.content,
+                content=clip.content))
     return out
 
 
@@ -135,16 +147,21 @@ class ZeggsData:
     def pose_dim(self) -> int:
         return int(self.sequences[0].pose.shape[1])
 
-    def batch(self, step: int, *, seed: int, batch: int, window: int, style_min: int, style_max: int) -> dict:
-        """Batch of ``step`` (deterministic in ``(seed, step)``); layout in the module docstring."""
+    def batch(self, step: int, *, seed: int, batch: int, window: int, style_min: int, style_max: int,
+              sampling: str = "overlap") -> dict:
+        """Batch of ``step`` (deterministic in ``(seed, step)``); layout in the module docstring; style
+        windows drawn by ``sampling`` (one of ``SAMPLING_MODES``, see :func:`style_window`)."""
+        if sampling not in SAMPLING_MODES:
+            raise DataError(f"unknown style sampling mode {sampling!r}; choose from {', '.join(SAMPLING_MODES)}")
         rng = np.random.default_rng([seed, step])
         lengths = np.array([s.frames for s in self.sequences])
-        need = max(window, style_min)
+        need = window + style_min if sampling == "disjoint" else max(window, style_min)
         ok = np.flatnonzero(lengths >= need)
         if len(ok) == 0:
             longest = self.sequences[int(np.argmax(lengths))]
             raise DataError(f"no clip is long enough: longest {longest.name} has {longest.frames} frames, "
-                            f"a batch needs {need} at {self.fps:g} fps")
+                            f"a batch needs {need} at {self.fps:g} fps"
+                            + (" (style sampling 'disjoint': target + style window)" if sampling == "disjoint" else ""))
         p = lengths[ok] / lengths[ok].sum()
         P = self.pose_dim
         out = {
@@ -157,27 +174,80 @@ class ZeggsData:
             "facing": np.zeros((batch, 3), np.float32),
         }
         for b in range(batch):
-            s = self.sequences[int(ok[rng.choice(len(ok), p=p)])]
-            t0 = int(rng.integers(0, s.frames - window + 1))
-            m = int(rng.integers(style_min, min(style_max, s.frames) + 1))
-            m = max(m, min(window, s.frames))
-            lo, hi = max(0, t0 + window - m), min(t0, s.frames - m)
-            s0 = int(rng.integers(lo, hi + 1)) if hi >= lo else max(0, min(t0, s.frames - m))
-            sl = slice(t0, t0 + window)
-            inv0 = R.quat_inv(s.root_rotation[t0])
-            out["speech"][b] = self.speech_stats.normalize(s.speech[sl])
-            out["pose"][b] = self.pose_stats.normalize(s.pose[sl])
-            out["root_position"][b] = R.quat_rotate(inv0, s.root_position[sl] - s.root_position[t0])
-            out["root_rotation"][b] = R.quat_mul(inv0, s.root_rotation[sl])
-            out["style"][b, :m] = self.pose_stats.normalize(s.pose[s0:s0 + m])
+            i = int(ok[rng.choice(len(ok), p=p)])
+            s = self.sequences[i]
+            t0, (j, s0, m) = style_window(self.sequences, i, rng, window=window, style_min=style_min,
+                                          style_max=style_max, sampling=sampling)
+            for k, v in target_arrays(s, t0, window, self.pose_stats, self.speech_stats).items():
+                out[k][b] = v
+            out["style"][b, :m] = self.pose_stats.normalize(self.sequences[j].pose[s0:s0 + m])
             out["style_mask"][b, :m] = True
-            out["facing"][b] = R.quat_rotate(inv0, s.facing)
         return out
+
+
+def target_arrays(s: Sequence_, t0: int, window: int, pose_stats: NormStats, speech_stats: NormStats) -> dict:
+    """The target part of one batch row (frames ``[t0, t0 + window)`` of ``s``): ``speech``, ``pose``
+    (normalised), ``root_position`` / ``root_rotation`` relative to the window's first frame and ``facing``
+    in that frame (layout in the module docstring, without the batch axis)."""
+    sl = slice(t0, t0 + window)
+    inv0 = R.quat_inv(s.root_rotation[t0])
+    return {"speech": speech_stats.normalize(s.speech[sl]), "pose": pose_stats.normalize(s.pose[sl]),
+            "root_position": R.quat_rotate(inv0, s.root_position[sl] - s.root_position[t0]),
+            "root_rotation": R.quat_mul(inv0, s.root_rotation[sl]), "facing": R.quat_rotate(inv0, s.facing)}
+
+
+def style_window(sequences, i: int, rng, *, window: int, style_min: int, style_max: int,
+                 sampling: str = "overlap"):
+    """A target window of sequence ``i`` and its style window: ``(t0, (j, s0, m))``.
+
+    The target is frames ``[t0, t0 + window)`` of ``sequences[i]``; the style window is frames
+    ``[s0, s0 + m)`` of ``sequences[j]``, ``m`` in ``[style_min, style_max]`` (capped by what fits):
+
+    * ``overlap``: ``j = i``, the style window contains the target (the paper, §4.3), or lies inside it
+      when the target is longer;
+    * ``disjoint``: ``j = i``, ``[s0, s0 + m)`` and ``[t0, t0 + window)`` do not intersect (needs
+      ``frames >= window + style_min``; the target start is redrawn until one side has room, after 32
+      draws the target starts at 0);
+    * ``other-clip``: ``j`` is a sequence of another source clip with the same style label (uniform over
+      those at least ``style_min`` frames long), the window anywhere in it; without one, ``disjoint``.
+
+    ``rng`` is a ``numpy.random.Generator`` (the batch's), so the draw is deterministic in it.
+    """
+    s = sequences[i]
+    F = s.frames
+    if sampling == "other-clip":
+        others = [k for k, o in enumerate(sequences)
+                  if o.style == s.style and o.clip != s.clip and o.frames >= style_min]
+        if others:
+            t0 = int(rng.integers(0, F - window + 1))
+            j = others[int(rng.integers(len(others)))]
+            Fj = sequences[j].frames
+            m = int(rng.integers(style_min, min(style_max, Fj) + 1))
+            return t0, (j, int(rng.integers(0, Fj - m + 1)), m)
+        sampling = "disjoint" if F >= window + style_min else "overlap"
+    if sampling == "disjoint":
+        for _ in range(32):
+            t0 = int(rng.integers(0, F - window + 1))
+            room = max(t0, F - t0 - window)
+            if room >= style_min:
+                break
+        else:
+            t0, room = 0, F - window
+        m = int(rng.integers(style_min, min(style_max, room) + 1))
+        sides = [lo_hi for lo_hi in ((0, t0 - m), (t0 + window, F - m)) if lo_hi[1] >= lo_hi[0]]
+        lo, hi = sides[int(rng.integers(len(sides)))]
+        return t0, (i, int(rng.integers(lo, hi + 1)), m)
+    t0 = int(rng.integers(0, F - window + 1))
+    m = int(rng.integers(style_min, min(style_max, F) + 1))
+    m = max(m, min(window, F))
+    lo, hi = max(0, t0 + window - m), min(t0, F - m)
+    s0 = int(rng.integers(lo, hi + 1)) if hi >= lo else max(0, min(t0, F - m))
+    return t0, (i, s0, m)
 
 
 def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Sequence[float] = SPEEDS,
           pose_stats: Optional[NormStats] = None, speech_stats: Optional[NormStats] = None,
-          progress: bool = False) -> ZeggsData:
+          progress: bool = False, loudness: bool = True) -> ZeggsData:
     """Sequences of every clip and (unless given) the normalisation statistics fitted on them."""
     if not clips:
         raise DataError("no clips to train on")
@@ -189,7 +259,7 @@ def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Seq
 
     seqs = []
     for c in tqdm(clips, desc="features", disable=not progress, leave=False):
-        seqs.extend(clip_sequences(c, fps=fps, mirror=mirror, speeds=speeds))
+        seqs.extend(clip_sequences(c, fps=fps, mirror=mirror, speeds=speeds, loudness=loudness))
     if not seqs:
         raise DataError("every clip is too short to use")
     pose_stats = pose_stats or NormStats.from_data([s.pose for s in seqs])

@@ -111,6 +111,49 @@ class RootSpec:
         return RootSpec(spine=names[chain[-1]], hips=names[hips], left_hip=left, right_hip=right)
 
 
+def translated_joints(skeleton: Skeleton) -> tuple[int, ...]:
+    """Joints whose translation a generated pose sets: the root and its single-child chain down to the hips.
+
+    On the ZEGGS rig that is the root (Hips) alone; on Bandai-Namco it is the static wrapper ``joint_Root``
+    and the animated ``Hips`` under it. Every other joint keeps its rest offset (bone length).
+    """
+    root = next(i for i, p in enumerate(skeleton.parents) if p < 0)
+    hips = skeleton.index(RootSpec.for_skeleton(skeleton).hips)
+    chain = [hips]
+    while chain[-1] != root:
+        chain.append(int(skeleton.parents[chain[-1]]))
+    return tuple(sorted(chain))
+
+
+def fk_fields(skeleton: Skeleton) -> dict:
+    """The rig as ``ZeggsConfig`` fields (``fk_parents``, ``fk_offsets``, ``fk_translated``), so the losses
+    can compute joint positions by forward kinematics of the predicted rotations (what is rendered)."""
+    return {"fk_parents": tuple(int(p) for p in skeleton.parents),
+            "fk_offsets": tuple(float(x) for x in np.asarray(skeleton.offsets, np.float64).ravel()),
+            "fk_translated": translated_joints(skeleton)}
+
+
+def fk_chain_matrix(parents, translated) -> tuple[np.ndarray, np.ndarray]:
+    """``(anchor (J,), chain (J, J))`` for FK from root-frame rotations: joint j's position is
+    ``pos[anchor[j]] + sum_k chain[j, k] * bone_k`` with ``bone_k = R_parent(k) offset_k``.
+
+    ``anchor[j]`` is the nearest joint at or above j whose translation the pose sets (``translated``; the
+    root always), ``chain[j, k] = 1`` for the joints k on the path from j up to, not including, the anchor.
+    """
+    parents = np.asarray(parents, np.int64)
+    J = len(parents)
+    fixed = set(int(t) for t in translated) | {j for j in range(J) if parents[j] < 0}
+    anchor = np.zeros(J, np.int64)
+    chain = np.zeros((J, J), np.float32)
+    for j in range(J):
+        k = j
+        while k not in fixed:
+            chain[j, k] = 1.0
+            k = int(parents[k])
+        anchor[j] = k
+    return anchor, chain
+
+
 def _find(names, candidates):
     for c in candidates:
         if c in names:
@@ -259,11 +302,14 @@ def features_to_motion(features: np.ndarray, template: Motion, root_position: np
     for j in range(J):
         p = sk.parents[j]
         local[:, j] = grot[:, j] if p < 0 else R.quat_mul(R.quat_inv(grot[:, p]), grot[:, j])
-    # Joints whose translation is animated in the template (the root; Bandai-Namco's Hips) get it back
-    # from the predicted positions; the others keep the template's rest offsets (bone lengths).
+    # The root and the joints down to the hips (Bandai-Namco's Hips under a static joint_Root) get their
+    # translation back from the predicted positions -- a property of the rig, not of the template's frames
+    # (at inference the template repeats one frame); so do joints animated in a multi-frame template.
+    # The others keep the template's rest offsets (bone lengths).
     world = R.quat_rotate(root_rotation[:, None], lpos) + np.asarray(root_position, np.float64)[:, None]
     trans = np.broadcast_to(sk.offsets[None], (F, J, 3)).copy()
     animated = template.translations.std(axis=0).max(axis=-1) > 1e-6
+    animated[list(translated_joints(sk))] = True
     for j in range(J):
         p = sk.parents[j]
         if p < 0:

@@ -7,8 +7,9 @@
    21-joint body joint maps), resampled to the model rate, its pose features normalised and encoded by the
    style encoder (posterior mean and log-variance), then sampled with ``temperature`` (one key per clip,
    ``fold_in(PRNGKey(seed), i)``);
-3. blending: ``e = sum_i w_i e_i / sum_i w_i`` (weights validated: one per clip, finite, positive sum) --
-   with weights (1, 0) this is the first clip's embedding exactly;
+3. blending: ``e = sum_i w_i e_i`` with the weights as given (one per clip, finite; default ``1 / n``
+   each), so weights (2, 0) give exactly ``2 e_1`` -- the paper scales embeddings as well as mixing them;
+   ``normalize_weights=True`` divides by ``sum_i w_i`` instead (then the sum must be positive);
 4. optional PCA edits of ``e`` (``workdir/pca.json``, see :mod:`jaxgest.zeggs.pca`);
 5. the generator runs autoregressively from the first style frame's pose, facing +Z, for
    ``round(duration * model fps)`` frames; features become a Motion on the training rig, then it is mapped
@@ -39,8 +40,23 @@ from jaxgest.zeggs.style_encoder import sample_style
 MIN_STYLE_SECONDS = 0.5  # the shortest style example accepted (frames at the model rate below this are too few)
 
 
-def validate_weights(weights, count: int) -> np.ndarray:
-    """Blend weights as an array: one per style clip, finite, with a positive sum."""
+# Config fields added after models were trained with the old behaviour: a workdir whose config.json lacks
+# one was trained with this value (the dataclass default is the new behaviour).
+LEGACY_DEFAULTS = {"loudness": False}
+
+
+def legacy_config(cfg, stored: dict):
+    """``cfg`` with the old behaviour of every field missing from a workdir's stored config dict."""
+    missing = {k: v for k, v in LEGACY_DEFAULTS.items() if k not in stored}
+    return cfg.replace(**missing) if missing else cfg
+
+
+def validate_weights(weights, count: int, *, normalize: bool = False) -> np.ndarray:
+    """Blend weights as an array: one per style clip, finite (default ``1 / count`` each).
+
+    ``normalize=True``: divided by their sum, which must then be positive.
+    References: Ghorbani et al. 2023, §5.2.1 (blending and scaling of style embeddings).
+    """
     if weights is None:
         return np.full(count, 1.0 / count)
     w = np.asarray(list(weights), np.float64)
@@ -48,8 +64,10 @@ def validate_weights(weights, count: int) -> np.ndarray:
         raise JaxgestError(f"blend weights: got {w.size} weight(s) for {count} style clip(s)")
     if not np.all(np.isfinite(w)):
         raise JaxgestError(f"blend weights must be finite, got {w.tolist()}")
-    if w.sum() <= 0:
-        raise JaxgestError(f"blend weights must have a positive sum, got {w.tolist()}")
+    if normalize:
+        if w.sum() <= 0:
+            raise JaxgestError(f"normalised blend weights must have a positive sum, got {w.tolist()}")
+        w = w / w.sum()
     return w
 
 
@@ -70,6 +88,7 @@ class ZeggsModel_:
 
         self.workdir = pathlib.Path(workdir)
         (self.cfg, params, self.pose_stats, self.speech_stats, self.reference, self.meta) = load_workdir(workdir)
+        self.cfg = legacy_config(self.cfg, self.meta["config"])
         self.params = jax.tree_util.tree_map(jnp.asarray, params)
         self._mean = jnp.asarray(self.pose_stats.mean, jnp.float32)
         self._std = jnp.asarray(self.pose_stats.std, jnp.float32)
@@ -114,11 +133,11 @@ class ZeggsModel_:
         return np.asarray(mu[0]), np.asarray(logvar[0])
 
     def style_embedding(self, styles: Sequence[Motion], *, weights=None, seed: int = 0, temperature: float = 1.0,
-                        pca_edits: Optional[dict] = None) -> np.ndarray:
-        """The blended (and PCA-edited) style embedding ``(D_e,)``."""
+                        pca_edits: Optional[dict] = None, normalize_weights: bool = False) -> np.ndarray:
+        """The blended (``sum_i w_i e_i``; PCA-edited) style embedding ``(D_e,)``."""
         if not styles:
             raise JaxgestError("at least one style clip is needed")
-        w = validate_weights(weights, len(styles))
+        w = validate_weights(weights, len(styles), normalize=normalize_weights)
         if not np.isfinite(temperature) or temperature < 0:
             raise JaxgestError(f"temperature must be finite and >= 0, got {temperature}")
         key = jax.random.PRNGKey(seed)
@@ -128,7 +147,7 @@ class ZeggsModel_:
             e = sample_style(jnp.asarray(mu)[None], jnp.asarray(logvar)[None], jax.random.fold_in(key, i),
                              float(temperature))
             es.append(np.asarray(e[0], np.float64))
-        e = np.tensordot(w / w.sum(), np.stack(es), axes=1)
+        e = np.tensordot(w, np.stack(es), axes=1)
         if pca_edits:
             from jaxgest.zeggs.pca import StylePCA
 
@@ -146,7 +165,7 @@ class ZeggsModel_:
             if sr is None:
                 raise JaxgestError("an audio array needs its sample rate")
         duration = len(y) / float(sr)
-        feats = speech_features(y, sr=sr, fps=self.cfg.fps)
+        feats = speech_features(y, sr=sr, fps=self.cfg.fps, loudness=self.cfg.loudness)
         if len(feats) < 2:
             raise DataError(f"{audio if isinstance(audio, (str, pathlib.Path)) else 'audio'}: "
                             f"{duration:.3f} s of audio is too short to generate from")
@@ -154,10 +173,12 @@ class ZeggsModel_:
 
     # -- generation --------------------------------------------------------------------------------------
     def generate(self, audio, styles: Sequence[Motion], *, weights=None, seed: int = 0, temperature: float = 1.0,
-                 pca_edits: Optional[dict] = None, sr: Optional[int] = None, name: str = "generated") -> Motion:
+                 pca_edits: Optional[dict] = None, sr: Optional[int] = None, name: str = "generated",
+                 normalize_weights: bool = False) -> Motion:
         """Gestures for ``audio`` in the (blended) style of ``styles``; a Motion on ``styles[0]``'s rig."""
         styles = list(styles)
-        e = self.style_embedding(styles, weights=weights, seed=seed, temperature=temperature, pca_edits=pca_edits)
+        e = self.style_embedding(styles, weights=weights, seed=seed, temperature=temperature, pca_edits=pca_edits,
+                                 normalize_weights=normalize_weights)
         speech, duration = self.speech(audio, sr=sr)
         first = self.style_features(styles[0])
         F = speech.shape[0]
@@ -220,9 +241,9 @@ def load_model(workdir) -> ZeggsModel_:
 
 
 def generate(audio, styles, *, workdir, weights=None, seed: int = 0, temperature: float = 1.0,
-             pca_edits: Optional[dict] = None) -> Motion:
+             pca_edits: Optional[dict] = None, normalize_weights: bool = False) -> Motion:
     """SPEC §7: ``generate(audio, styles, *, workdir, weights=None, seed=0, temperature=1.0) -> Motion``."""
     if isinstance(styles, Motion):
         styles = [styles]
     return load_model(workdir).generate(audio, styles, weights=weights, seed=seed, temperature=temperature,
-                                        pca_edits=pca_edits)
+                                        pca_edits=pca_edits, normalize_weights=normalize_weights)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import chex
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgest.motion import rotations as R
 from jaxgest.zeggs.config import ZeggsConfig
@@ -81,12 +82,40 @@ def facing_direction(root_rotation: jax.Array) -> jax.Array:
     return R.quat_rotate(root_rotation, fwd)
 
 
+def forward_kinematics(rotation: jax.Array, position: jax.Array, cfg: ZeggsConfig) -> jax.Array:
+    """Root-frame joint positions ``(..., j, 3)`` by FK of root-frame 6-D rotations ``(..., j, 6)``.
+
+    The rig comes from ``cfg.fk_parents`` / ``cfg.fk_offsets``: a joint's position is its parent's plus the
+    parent's rotation applied to its rest offset, except the joints whose translation the pose sets
+    (``cfg.fk_translated``: the root and its chain to the hips), which take ``position``. These are the
+    positions of the motion :func:`jaxgest.zeggs.features.features_to_motion` renders. The rotations are
+    already in the root frame (not parent-relative), so FK is one sum of rotated bones per joint.
+    References: Ghorbani et al. 2023, §4.3 (losses "in both local and world spaces"); the authors' train.py
+    (character/world terms by FK of the predicted rotations).
+    """
+    from jaxgest.zeggs.features import fk_chain_matrix
+
+    j = cfg.num_joints
+    if len(cfg.fk_parents) != j or len(cfg.fk_offsets) != 3 * j:
+        raise ValueError(f"fk_parents / fk_offsets describe {len(cfg.fk_parents)} joints, the model has {j}")
+    anchor, chain = fk_chain_matrix(cfg.fk_parents, cfg.fk_translated)
+    parents = np.maximum(np.asarray(cfg.fk_parents), 0)
+    offsets = jnp.asarray(np.asarray(cfg.fk_offsets, np.float32).reshape(j, 3), position.dtype)
+    mats = R.sixd_to_matrix(rotation)  # (..., j, 3, 3), columns = rotated axes
+    bones = jnp.einsum("...kab,kb->...ka", mats[..., parents, :, :], offsets)
+    return position[..., anchor, :] + jnp.einsum("jk,...kc->...jc", jnp.asarray(chain, position.dtype), bones)
+
+
 def reconstruction_terms(pred_pose: jax.Array, pred_root_position: jax.Array, pred_root_rotation: jax.Array,
                          target_pose: jax.Array, target_root_position: jax.Array,
                          target_root_rotation: jax.Array, *, cfg: ZeggsConfig) -> dict[str, jax.Array]:
     """Every unweighted MAE term of eq. 2, each ``(batch,)``.
 
     Poses ``(batch, T, P)`` *denormalised*; root positions ``(batch, T, 3)``, rotations ``(batch, T, 4)``.
+    With the rig in ``cfg`` (``fk_parents``), every position term (local/world position and their finite
+    differences) uses FK of the rotations, :func:`forward_kinematics` -- the motion that is rendered -- and
+    ``predicted_position`` keeps the predicted position channels (which the generator reads back) near the
+    target's; without it, the position terms use the predicted channels and ``predicted_position`` is 0.
     Keys: local/world position (L_p), local/world rotation (L_r), local/world velocity (L_vp), local/world
     angular (L_vr), fd_local/world_position (L_dp), fd_local/world_rotation (L_dr), facing (L_f) and the
     root terms of the authors' code (root_position, root_rotation, root_velocity, root_angular).
@@ -95,10 +124,17 @@ def reconstruction_terms(pred_pose: jax.Array, pred_root_position: jax.Array, pr
     chex.assert_equal_shape([pred_pose, target_pose])
     fps = cfg.fps
     p, t = split_pose(pred_pose, cfg), split_pose(target_pose, cfg)
+    fd = finite_difference
+    if cfg.fk_parents:  # positions of the rendered motion: FK of the rotations (both sides)
+        raw = mae(p["position"], t["position"])
+        p = {**p, "position": forward_kinematics(p["rotation"], p["position"], cfg)}
+        t = {**t, "position": forward_kinematics(t["rotation"], t["position"], cfg)}
+    else:
+        raw = jnp.zeros(pred_pose.shape[:1], pred_pose.dtype)
     pw = to_world(p, pred_root_position, pred_root_rotation)
     tw = to_world(t, target_root_position, target_root_rotation)
-    fd = finite_difference
     return {
+        "predicted_position": raw,
         "local_position": mae(p["position"], t["position"]),
         "world_position": mae(pw["position"], tw["position"]),
         "local_rotation": mae(p["rotation"], t["rotation"]),
@@ -125,7 +161,7 @@ def term_weights(cfg: ZeggsConfig) -> dict[str, float]:
         "local_position", "world_position", "local_rotation", "world_rotation", "local_velocity",
         "world_velocity", "local_angular", "world_angular", "fd_local_position", "fd_world_position",
         "fd_local_rotation", "fd_world_rotation", "root_position", "root_rotation", "root_velocity",
-        "root_angular", "facing")}
+        "root_angular", "facing", "predicted_position")}
 
 
 def kl_divergence(mu: jax.Array, logvar: jax.Array, *, reduction: str = "sum") -> jax.Array:

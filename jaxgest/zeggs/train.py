@@ -31,6 +31,7 @@ from jaxgest.motion.synthetic.dataset import training_folder
 from jaxgest.training import (FORMAT_VERSION, Checkpointer, MetricsLogger, TrainState, check_intervals,
                               check_steps, check_workdir_config, train_loop, write_json_atomic)
 from jaxgest.zeggs import data as zdata
+from jaxgest.zeggs import features as Fe
 from jaxgest.zeggs.config import config_from_dict, get_config
 from jaxgest.zeggs.steps import init_params, make_optimizer, make_train_step
 
@@ -42,7 +43,7 @@ _COMPILED: dict = {}  # (config, statistics, devices, argument shapes) -> compil
 
 def _config_for(preset: str, skeleton, overrides: Optional[dict] = None):
     try:
-        return get_config(preset, num_joints=skeleton.num_joints, **(overrides or {}))
+        return get_config(preset, num_joints=skeleton.num_joints, **{**Fe.fk_fields(skeleton), **(overrides or {})})
     except ValueError as e:
         raise DataError(str(e)) from None
 
@@ -64,7 +65,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
         raise DataError(f"{data_dir}: no clip has audio (ZeroEGGS needs BVH + WAV pairs)")
     skeleton = clips[0].motion.skeleton
     cfg = _config_for(preset, skeleton, overrides)
-    steps = int(steps if steps is not None else (300 if preset == "tiny" else 120_000))
+    steps = int(steps if steps is not None else {"tiny": 300, "small": 8000}.get(preset, 120_000))
 
     stats_paths = workdir / "pose_stats.json", workdir / "speech_stats.json"
     resume = all(p.is_file() for p in stats_paths)
@@ -72,7 +73,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
     speech_stats = NormStats.load(stats_paths[1]) if resume else None
     a = cfg.speed_augmentation
     data = zdata.build(clips, fps=cfg.fps, mirror=cfg.mirror, speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,),
-                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress)
+                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=cfg.loudness)
     if data.pose_dim != cfg.pose_dim:
         raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {cfg.pose_dim}")
 
@@ -110,7 +111,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
 
     def batch_fn(i):
         return data.batch(i, seed=seed, batch=cfg.batch_size, window=cfg.window,
-                          style_min=cfg.style_window_min, style_max=cfg.style_window_max)
+                          style_min=cfg.style_window_min, style_max=cfg.style_window_max,
+                          sampling=cfg.style_sampling)
 
     batches = parallel.sharded_batch_fn(batch_fn, mesh)
     logger = MetricsLogger(workdir, extra={"stage": KIND, **info})
@@ -164,7 +166,7 @@ def load_workdir(workdir):
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise CheckpointError(f"{cfg_path}: config from another version of jaxgest ({type(e).__name__}: {e}); "
                               "retrain into a new --workdir") from None
-    ckpt = Checkpointer(workdir, kind=KIND, config={"preset": preset, **cfg.to_dict()},
+    ckpt = Checkpointer(workdir, kind=KIND, config={"preset": preset, **meta["config"]},  # as stored
                         skeleton=skeleton, subdir=CKPT_SUBDIR, read_only=True, ignore=IGNORED)
     template = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
     params = ckpt.restore_params(jax.tree_util.tree_map(lambda s: np.zeros(s.shape, s.dtype), template))

@@ -108,6 +108,8 @@ class ZeggsConfig:
     fk_offsets: tuple[float, ...] = ()  # the rig's rest offsets, J * 3 (file units)
     fk_translated: tuple[int, ...] = ()  # joints whose translation the pose sets (root and its chain to the hips)
     w_predicted_position: float = 1.0  # with FK: the predicted root-frame position channels themselves (read back)
+    input_norm: str = "group"  # pose inputs (style clip, generator's pose state): "group" = one std per feature
+    #   group, as the authors (outputs stay per channel); "channel" = the per-channel std of outputs (old)
 
     def __post_init__(self):
         if len(self.speech_channels) != len(self.speech_kernels):

@@ -74,7 +74,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
     speech_stats = NormStats.load(stats_paths[1]) if resume else None
     a = cfg.speed_augmentation
     data = zdata.build(clips, fps=cfg.fps, mirror=cfg.mirror, speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,),
-                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=cfg.loudness)
+                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=cfg.loudness,
+                       input_norm=cfg.input_norm)
     if data.pose_dim != cfg.pose_dim:
         raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {cfg.pose_dim}")
 
@@ -161,7 +162,8 @@ def load_workdir(workdir):
     if meta.get("model") != KIND:
         raise CheckpointError(f"{workdir}: holds a {meta.get('model', meta.get('kind', 'unknown'))!r} model, not a ZeroEGGS model")
     cfg = config_from_dict(meta["config"])
-    ckpt = Checkpointer(workdir, kind=KIND, config={"preset": meta["preset"], **cfg.to_dict()},
+    # Compared as stored: a workdir from before a config field existed (its default now new behaviour) loads.
+    ckpt = Checkpointer(workdir, kind=KIND, config={"preset": meta["preset"], **meta["config"]},
                         skeleton=meta["skeleton"], subdir=CKPT_SUBDIR, read_only=True, ignore=IGNORED)
     template = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
     params = ckpt.restore_params(jax.tree_util.tree_map(lambda s: np.zeros(s.shape, s.dtype), template))

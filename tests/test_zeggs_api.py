@@ -179,16 +179,15 @@ def test_blend_weights(trained, clips):
         generate(audio, styles, workdir=work, weights=[np.nan, 1])
 
 
-def test_pca_edit_changes_output_and_bad_component_is_clear(with_pca, clips):
+def test_pca_zero_edit_is_identity_and_bad_component_is_clear(with_pca, clips):
+    """(The direction of an edit is tested on a trained model in test_zeggs_style_control.py.)"""
     from jaxgest.zeggs.api import generate
 
     work = with_pca
     styles, audio = clips
     base = generate(audio, styles[0], workdir=work, seed=0)
     zero = generate(audio, styles[0], workdir=work, seed=0, pca_edits={0: 0.0})
-    edited = generate(audio, styles[0], workdir=work, seed=0, pca_edits={0: 2.0})
     np.testing.assert_allclose(zero.rotations, base.rotations, atol=1e-4)
-    assert np.abs(edited.rotations - base.rotations).max() > 1e-3
     with pytest.raises(JaxgestError, match="component 42 does not exist"):
         generate(audio, styles[0], workdir=work, pca_edits={42: 1.0})
 

@@ -285,13 +285,14 @@ def test_training_folder_with_a_malformed_bvh(ctx, capsys, tmp_path):
 @pytest.mark.parametrize("weights,expected", [
     ("0.5", "blend weights: got 1 weight(s) for 2 style clip(s)"),
     ("0.2,0.3,0.5", "blend weights: got 3 weight(s) for 2 style clip(s)"),
-    ("0,0", "blend weights must have a positive sum"),
+    ("0,0 --normalize-weights", "normalised blend weights must have a positive sum"),  # raw 0,0 is e = 0
+    ("nan,1", "blend weights must be finite"),
     ("a,b", "--weights 'a,b': expected comma-separated numbers"),
 ])
 def test_bad_blend_weights(ctx, capsys, weights, expected):
     out = _out(ctx)
     rc, msg = run_cli(_generate(ctx, styles=[ctx["good"], ctx["style2"]], out=out,
-                                extra=["--weights", weights]), capsys, out)
+                                extra=["--weights", *weights.split()]), capsys, out)
     assert rc == 2 and expected in msg, msg
 
 

@@ -179,16 +179,15 @@ def test_blend_weights(trained, clips):
         generate(audio, styles, workdir=work, weights=[np.nan, 1])
 
 
-def test_pca_edit_changes_output_and_bad_component_is_clear(with_pca, clips):
+def test_pca_zero_edit_is_identity_and_bad_component_is_clear(with_pca, clips):
+    """(The direction of an edit is tested on a trained model in test_zeggs_style_control.py.)"""
     from jaxgest.zeggs.api import generate
 
     work = with_pca
     styles, audio = clips
     base = generate(audio, styles[0], workdir=work, seed=0)
     zero = generate(audio, styles[0], workdir=work, seed=0, pca_edits={0: 0.0})
-    edited = generate(audio, styles[0], workdir=work, seed=0, pca_edits={0: 2.0})
     np.testing.assert_allclose(zero.rotations, base.rotations, atol=1e-4)
-    assert np.abs(edited.rotations - base.rotations).max() > 1e-3
     with pytest.raises(JaxgestError, match="component 42 does not exist"):
         generate(audio, styles[0], workdir=work, pca_edits={42: 1.0})
 
@@ -340,20 +339,28 @@ def test_style_example_prefers_another_content_of_the_same_style():
     assert style_example(clip, [other_style, clip]) is clip  # nothing else of this style: the clip itself
 
 
-def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, tmp_path):
-    """A model trained before speech loudness normalisation existed is fed unnormalised speech."""
+def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, clips, tmp_path):
+    """A model trained before loudness normalisation and group input normalisation existed loads (and
+    generates) with unnormalised speech and per-channel inputs, as it was trained."""
     import shutil
 
     from jaxgest.zeggs.inference import load_model
 
     _, work, _ = trained
-    assert load_model(work).cfg.loudness is True  # the default of new models
+    new = load_model(work).cfg
+    assert new.loudness is True and new.input_norm == "group" and new.fk_parents  # defaults of new models
     old = tmp_path / "old"
     shutil.copytree(work, old)
-    meta = json.loads((old / "config.json").read_text())
-    del meta["config"]["loudness"]
-    (old / "config.json").write_text(json.dumps(meta))
-    assert load_model(old).cfg.loudness is False
+    new_fields = ("loudness", "input_norm", "fk_parents", "fk_offsets", "fk_translated", "w_predicted_position")
+    for path in [old / "config.json", *old.glob("checkpoints/zeggs/*/meta/metadata")]:  # as an old run wrote
+        meta = json.loads(path.read_text())
+        for k in new_fields:
+            del meta["config"][k]
+        path.write_text(json.dumps(meta))
+    model = load_model(old)
+    assert model.cfg.loudness is False and model.cfg.input_norm == "channel"
+    styles, audio = clips
+    assert np.all(np.isfinite(model.generate(audio, styles[:1]).rotations))
 
 
 def test_train_cli_no_loudness_flag_reaches_the_config(monkeypatch):

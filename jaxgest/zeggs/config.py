@@ -123,6 +123,8 @@ class ZeggsConfig:
     fk_offsets: tuple[float, ...] = ()  # the rig's rest offsets, J * 3 (file units)
     fk_translated: tuple[int, ...] = ()  # joints whose translation the pose sets (root and its chain to the hips)
     w_predicted_position: float = 1.0  # with FK: the predicted root-frame position channels themselves (read back)
+    input_norm: str = "group"  # pose inputs (style clip, generator's pose state): "group" = one std per feature
+    #   group, as the authors (outputs stay per channel); "channel" = the per-channel std of outputs (old)
     # style sampling / evaluation
     style_sampling: str = "disjoint"  # where a training style window comes from (jaxgest.zeggs.data.style_window):
     #   "overlap" (the paper: contains the target), "disjoint" (same clip, apart from the target) or

@@ -247,7 +247,7 @@ def style_window(sequences, i: int, rng, *, window: int, style_min: int, style_m
 
 def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Sequence[float] = SPEEDS,
           pose_stats: Optional[NormStats] = None, speech_stats: Optional[NormStats] = None,
-          progress: bool = False, loudness: bool = True) -> ZeggsData:
+          progress: bool = False, loudness: bool = True, input_norm: str = "group") -> ZeggsData:
     """Sequences of every clip and (unless given) the normalisation statistics fitted on them."""
     if not clips:
         raise DataError("no clips to train on")
@@ -262,7 +262,7 @@ def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Seq
         seqs.extend(clip_sequences(c, fps=fps, mirror=mirror, speeds=speeds, loudness=loudness))
     if not seqs:
         raise DataError("every clip is too short to use")
-    pose_stats = pose_stats or NormStats.from_data([s.pose for s in seqs])
+    pose_stats = pose_stats or Fe.pose_statistics([s.pose for s in seqs], input_norm=input_norm)
     speech_stats = speech_stats or NormStats.from_data([s.speech for s in seqs])
     return ZeggsData(seqs, pose_stats, speech_stats, fps, clips[0].motion.skeleton)
 

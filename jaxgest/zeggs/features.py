@@ -263,6 +263,24 @@ def extract_features(motion: Motion, spec: RootSpec | None = None) -> dict:
     }
 
 
+def pose_statistics(poses, *, input_norm: str = "group", trim: int = 2, eps: float = 1e-5):
+    """Per-channel mean and std of pose features over training sequences, ``trim`` frames cut at both
+    ends of each (their velocities are copies or boundary effects), std floored at ``eps`` only against
+    division by zero. A :class:`jaxgest.motion.datasets.NormStats`; the outputs are denormalised with it and
+    the inputs rescaled to one std per group (:func:`jaxgest.zeggs.generator.input_scale`).
+    ``input_norm="channel"`` (the old behaviour, inputs normalised per channel): every frame, std floored
+    at 1e-2.
+    References: the authors' data_pipeline.py (statistics over ``s + 2 : e - 2`` of every clip; output
+    std per channel, no floor).
+    """
+    from jaxgest.motion.datasets import NormStats
+
+    if input_norm == "channel":
+        return NormStats.from_data(list(poses))
+    cut = [np.asarray(p)[trim:len(p) - trim] if len(p) > 2 * trim else np.asarray(p) for p in poses]
+    return NormStats.from_data(cut, eps=eps)
+
+
 def integrate_root(root_vel: np.ndarray, root_ang: np.ndarray, fps: float, start_pos=None, start_rot=None):
     """Integrate root velocities (in the root frame) into positions and yaw quaternions (NumPy).
 

@@ -5,7 +5,8 @@ root frame, s_t (speech embedding), e (style)]``, applies a linear layer with EL
 ``[that, input]`` to two stacked GRU layers and a linear output layer that predicts the normalised pose
 y_t. The "Update Character State" block denormalises y_t and integrates the predicted root velocities
 into the root transform (position + yaw quaternion); y_t is fed back (no teacher forcing). Frame 0 is the
-given initial pose. The hidden-state initializer (3 linear layers, ELU after the first two, as in the
+given initial pose. As in the authors' code, the pose is predicted in the per-channel (output)
+normalisation and read back in the input normalisation, one std per feature group (:func:`input_scale`). The hidden-state initializer (3 linear layers, ELU after the first two, as in the
 authors' code) maps ``[y_0, facing in the root frame, e]`` to the hidden states of all GRU layers.
 
 :class:`RecurrentDecoder` is one step (an ``nn.RNNCellBase`` whose carry is ``(hidden states, pose state,
@@ -74,6 +75,33 @@ def update_character_state(pose: jax.Array, root_position: jax.Array, root_rotat
     return pos, rot
 
 
+def input_scale(cfg: ZeggsConfig, pose_mean: jax.Array, pose_std: jax.Array) -> jax.Array:
+    """Per-channel factor ``(P,)`` from the per-channel (output) normalisation to the input normalisation.
+
+    Inputs (style clips, the generator's pose state) are normalised as the authors do: per-channel mean,
+    one std per feature group (root-frame positions, rotations, velocities, angular velocities, root
+    velocity, root angular velocity) -- the std of all the group's values, i.e.
+    ``sqrt(mean_c std_c^2 + var_c mean_c)`` -- so a near-constant channel is not blown up by its own tiny
+    std. Outputs stay per channel. ``x_in = x_out * std_c / std_group``; ones when ``cfg.input_norm`` is
+    ``"channel"`` (the old behaviour). References: the authors' data_pipeline.py (``anim_input_std`` one
+    value per group, ``anim_output_std`` per channel).
+    """
+    std = jnp.asarray(pose_std)
+    if cfg.input_norm == "channel":
+        return jnp.ones_like(std)
+    if cfg.input_norm != "group":
+        raise ValueError(f"input_norm must be 'group' or 'channel', got {cfg.input_norm!r}")
+    mean = jnp.asarray(pose_mean, std.dtype)
+    lay = cfg.layout
+    parts = []
+    for g in (lay.local_positions, lay.local_rotations, lay.local_velocities, lay.local_angular_velocities,
+              lay.root_velocity, lay.root_angular_velocity):
+        m, s = mean[g], std[g]
+        group = jnp.sqrt(jnp.mean(jnp.square(s)) + jnp.var(m))
+        parts.append(s / jnp.maximum(group, 1e-12))
+    return jnp.concatenate(parts)
+
+
 def local_facing(facing: jax.Array, root_rotation: jax.Array) -> jax.Array:
     """World target facing direction ``(batch, 3)`` expressed in the root frame (``q^-1 f``)."""
     return R.quat_rotate(R.quat_inv(root_rotation), facing)
@@ -112,8 +140,8 @@ class RecurrentDecoder(nn.RNNCellBase):
         cfg = self.cfg
         hidden, pose, root_pos, root_rot = carry
         speech_t, style_t = inputs
-        facing, pose_mean, pose_std = consts
-        x = jnp.concatenate([pose, local_facing(facing, root_rot), speech_t, style_t], axis=-1)
+        facing, pose_mean, pose_std, in_scale = consts
+        x = jnp.concatenate([pose * in_scale[None], local_facing(facing, root_rot), speech_t, style_t], axis=-1)
         h = nn.elu(nn.Dense(cfg.gru_hidden, name="input_layer")(x))
         h = jnp.concatenate([h, x], axis=-1)
         new_hidden = []
@@ -145,7 +173,7 @@ def _prepare(cfg: ZeggsConfig, pose0, root_position0, root_rotation0, facing, sp
     dtype = pose0.dtype
     mean = jnp.zeros((cfg.pose_dim,), dtype) if pose_mean is None else jnp.asarray(pose_mean, dtype)
     std = jnp.ones((cfg.pose_dim,), dtype) if pose_std is None else jnp.asarray(pose_std, dtype)
-    return style, (facing, mean, std)
+    return style, (facing, mean, std, input_scale(cfg, mean, std))
 
 
 def _stack_outputs(pose0, root_position0, root_rotation0, ys, ps, qs):
@@ -175,8 +203,8 @@ class Generator(nn.Module):
                        in_axes=(1, nn.broadcast), out_axes=1)
         self.decoder = scan(self.cfg, name="decoder")
 
-    def initial_carry(self, pose0, root_position0, root_rotation0, facing, style_seq) -> Carry:
-        hidden = self.initializer(pose0, local_facing(facing, root_rotation0), style_seq[:, 0])
+    def initial_carry(self, pose0, root_position0, root_rotation0, facing, style_seq, in_scale=None) -> Carry:
+        hidden = self.initializer(pose0 if in_scale is None else pose0 * in_scale[None], local_facing(facing, root_rotation0), style_seq[:, 0])
         return hidden, pose0, root_position0, root_rotation0
 
     def __call__(self, pose0: jax.Array, root_position0: jax.Array, root_rotation0: jax.Array,
@@ -184,7 +212,7 @@ class Generator(nn.Module):
                  pose_mean: Optional[jax.Array] = None, pose_std: Optional[jax.Array] = None) -> dict[str, Any]:
         style, consts = _prepare(self.cfg, pose0, root_position0, root_rotation0, facing, speech, style,
                                  pose_mean, pose_std)
-        carry = self.initial_carry(pose0, root_position0, root_rotation0, facing, style)
+        carry = self.initial_carry(pose0, root_position0, root_rotation0, facing, style, consts[3])
         _, (ys, ps, qs) = self.decoder(carry, (speech[:, 1:], style[:, 1:]), consts)
         out = _stack_outputs(pose0, root_position0, root_rotation0, ys, ps, qs)
         chex.assert_shape(out["pose"], speech.shape[:2] + (self.cfg.pose_dim,))
@@ -196,7 +224,7 @@ def generate_loop_reference(cfg: ZeggsConfig, params, pose0, root_position0, roo
     """The generator as a slow Python loop over frames with the same ``params`` (tests only)."""
     style, consts = _prepare(cfg, pose0, root_position0, root_rotation0, facing, speech, style,
                              pose_mean, pose_std)
-    hidden = HiddenStateInitializer(cfg).apply({"params": params["initializer"]}, pose0,
+    hidden = HiddenStateInitializer(cfg).apply({"params": params["initializer"]}, pose0 * consts[3][None],
                                                local_facing(facing, root_rotation0), style[:, 0])
     carry: Carry = (hidden, pose0, root_position0, root_rotation0)
     cell = RecurrentDecoder(cfg)

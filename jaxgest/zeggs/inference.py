@@ -34,6 +34,7 @@ from jaxgest.motion import body as B
 from jaxgest.motion.datasets import fit_frames, resample_motion
 from jaxgest.motion.skeleton import Motion
 from jaxgest.zeggs import features as Fe
+from jaxgest.zeggs.generator import input_scale
 from jaxgest.zeggs.steps import ZeggsModel
 from jaxgest.zeggs.style_encoder import sample_style
 
@@ -42,7 +43,7 @@ MIN_STYLE_SECONDS = 0.5  # the shortest style example accepted (frames at the mo
 
 # Config fields added after models were trained with the old behaviour: a workdir whose config.json lacks
 # one was trained with this value (the dataclass default is the new behaviour).
-LEGACY_DEFAULTS = {"loudness": False}
+LEGACY_DEFAULTS = {"loudness": False, "input_norm": "channel"}
 
 
 def legacy_config(cfg, stored: dict):
@@ -92,6 +93,7 @@ class ZeggsModel_:
         self.params = jax.tree_util.tree_map(jnp.asarray, params)
         self._mean = jnp.asarray(self.pose_stats.mean, jnp.float32)
         self._std = jnp.asarray(self.pose_stats.std, jnp.float32)
+        self._in_scale = input_scale(self.cfg, self._mean, self._std)  # inputs: one std per group
         self._fns = _jitted(self.cfg)
 
     def _encode_style(self, params, style, mask):
@@ -116,7 +118,13 @@ class ZeggsModel_:
 
     # -- pieces ------------------------------------------------------------------------------------------
     def style_features(self, style: Motion) -> np.ndarray:
-        """Normalised pose features ``(F, P)`` of a style clip on the training rig at the model rate."""
+        """Pose features ``(F, P)`` of a style clip on the training rig at the model rate, normalised as the
+        style encoder's input (per-channel mean, one std per group: ``cfg.input_norm``)."""
+        return (self.pose_features(style) * np.asarray(self._in_scale)[None]).astype(np.float32)
+
+    def pose_features(self, style: Motion) -> np.ndarray:
+        """Pose features ``(F, P)`` of a clip on the training rig at the model rate, normalised per channel
+        (the generator's output normalisation, in which it takes its initial pose)."""
         try:
             m = resample_motion(to_rig(style, self.reference), self.cfg.fps)
         except JaxgestError as e:  # e.g. a rig that matches no joint map: name the clip
@@ -180,7 +188,7 @@ class ZeggsModel_:
         e = self.style_embedding(styles, weights=weights, seed=seed, temperature=temperature, pca_edits=pca_edits,
                                  normalize_weights=normalize_weights)
         speech, duration = self.speech(audio, sr=sr)
-        first = self.style_features(styles[0])
+        first = self.pose_features(styles[0])
         F = speech.shape[0]
         s_emb = self._encode_speech(self.params, jnp.asarray(speech)[None])
         q0 = jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32)

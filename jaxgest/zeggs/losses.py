@@ -10,6 +10,12 @@ root; velocities are world velocities expressed in the root frame (as ``extract_
 World quantities apply the root transform: positions ``q p + r``, rotations ``q R`` (both 6-D columns
 rotated), velocities ``q v``. The vertical axis is Y and the world forward +Z (both datasets).
 
+With the rig in the config (``fk_parents`` etc., set from the data by training), the position terms --
+character frame ("local"), world, and their finite differences -- use joint positions by forward
+kinematics of the predicted rotations (:func:`forward_kinematics`), the motion that is rendered, as the
+authors' train.py computes its character/world terms; the predicted position channels keep a term of their
+own (``predicted_position``) because the generator reads them back.
+
 The paper names the terms (eq. 2) and says each is an MAE "in both local and world spaces" and that the
 weights are chosen empirically; the authors' code adds root position / rotation / velocity terms and
 divides the sum by 18 -- we keep every term, with the code's weights (``ZeggsConfig.w_*``), and say which

@@ -13,8 +13,10 @@ Batch layout (float32 unless said; produced by :meth:`jaxgest.zeggs.data.ZeggsDa
 ``make_train_step(cfg, tx, pose_mean=..., pose_std=...)`` returns ``step(state, batch, key) -> (state,
 metrics)``, to be wrapped as ``jax.jit(step, donate_argnums=(0,))``. The key is folded with the step
 number inside; it drives dropout and the reparameterised style sample. ``pose_mean`` / ``pose_std``
-``(P,)`` are the dataset statistics used to normalise ``pose`` (closed over as constants): the generator
-denormalises its predictions to integrate the root and the losses work on denormalised features.
+``(P,)`` are the per-channel dataset statistics used to normalise ``pose`` and ``style`` (closed over as
+constants): the generator denormalises its predictions with them (outputs are per channel) to integrate the
+root and the losses work on denormalised features; pose *inputs* (the style clip, the generator's pose
+state) are rescaled to one std per feature group (``generator.input_scale``, ``cfg.input_norm``).
 Metrics: ``loss``, ``recon``, ``kl``, ``kl_weight`` and every reconstruction term (batch means).
 
 References: Ghorbani et al. 2023, §3 (Fig. 2) and §4.3 (RAdam 1e-4, decay 0.995 every 1k steps, no
@@ -36,7 +38,7 @@ from flax.training.train_state import TrainState
 
 from jaxgest.zeggs import losses as L
 from jaxgest.zeggs.config import ZeggsConfig
-from jaxgest.zeggs.generator import Generator
+from jaxgest.zeggs.generator import Generator, input_scale
 from jaxgest.zeggs.speech_encoder import SpeechEncoder
 from jaxgest.zeggs.style_encoder import StyleEncoder, sample_style
 
@@ -148,8 +150,9 @@ def loss_terms(params, batch: dict, key: jax.Array, step, *, cfg: ZeggsConfig, p
     chex.assert_shape(batch["root_rotation"], (B, T, 4))
     chex.assert_shape(batch["facing"], (B, 3))
     k_drop, k_sample = jax.random.split(key)
+    style = batch["style"] * input_scale(cfg, pose_mean, pose_std)[None, None]  # style inputs: group normalisation
     out, aux = ZeggsModel(cfg).apply(
-        {"params": params}, batch["speech"], batch["style"], batch["style_mask"], batch["pose"][:, 0],
+        {"params": params}, batch["speech"], style, batch["style_mask"], batch["pose"][:, 0],
         batch["root_position"][:, 0], batch["root_rotation"][:, 0], batch["facing"], k_sample, pose_mean, pose_std,
         deterministic=deterministic, rngs={"dropout": k_drop})
     mean, std = pose_mean[None, None], pose_std[None, None]

@@ -73,7 +73,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
     speech_stats = NormStats.load(stats_paths[1]) if resume else None
     a = cfg.speed_augmentation
     data = zdata.build(clips, fps=cfg.fps, mirror=cfg.mirror, speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,),
-                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=cfg.loudness)
+                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=cfg.loudness,
+                       input_norm=cfg.input_norm)
     if data.pose_dim != cfg.pose_dim:
         raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {cfg.pose_dim}")
 

@@ -468,7 +468,7 @@ def test_unknown_model_kind(ctx, capsys, tmp_path, model):
                                "an older layout or not a jaxgest workdir; retrain into a new --workdir"), err
 
 
-@pytest.mark.parametrize("model,field", [("tgst", "transformer_window"), ("zeggs", "style_window_max")])
+@pytest.mark.parametrize("model,field", [("tgst", "transformer_window")])
 def test_older_layout_without_a_current_field(ctx, capsys, tmp_path, model, field):
     """A workdir written before ``field`` existed (absent from config.json and from the checkpoints)."""
     work = copy(ctx, model, tmp_path)
@@ -478,6 +478,18 @@ def test_older_layout_without_a_current_field(ctx, capsys, tmp_path, model, fiel
     rc, err, _ = run(infer(ctx, model, work, tmp_path / "o.bvh"), capsys)
     assert rc == 2 and "checkpoint from an older version of jaxgest (config without" in err and field in err, err
     assert err.endswith("retrain into a new --workdir with this version (checkpoints are not converted)"), err
+
+
+def test_older_zeggs_layout_without_a_current_field_still_generates(ctx, capsys, tmp_path):
+    """ZeroEGGS reads its checkpoint against config.json as stored: a workdir written before a (training-only)
+    field existed still generates, with no output on stderr (fields that change inference have legacy values in
+    jaxgest.zeggs.inference.LEGACY_DEFAULTS, tested in test_zeggs_api)."""
+    work = copy(ctx, "zeggs", tmp_path)
+    _edit_config(work, lambda d: d["config"].pop("style_window_max"))
+    _edit_meta(work, "zeggs", lambda d: d["config"].pop("style_window_max", None))
+    rc, err, _ = run(infer(ctx, "zeggs", work, tmp_path / "o.bvh"), capsys)
+    assert rc == 0 and err == "", err
+    assert (tmp_path / "o.bvh").is_file()
 
 
 def test_config_with_an_unknown_field(ctx, capsys, tmp_path):

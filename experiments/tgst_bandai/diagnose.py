@@ -13,7 +13,7 @@
    style error and content error of the round trip (the evaluation's errors).
 3. Swap diagnostics (needs a trained transformer; skip with --no-swap) on the inter pairs of the held-out
    contents via jaxgest.tgst.model.swap_weights: mean largest soft-swap weight, effective number of blended
-   style tokens exp(entropy), fraction of content tokens whose argmax style token lies within +-1 index of
+   style tokens 1 / sum w^2, fraction of content tokens whose argmax style token lies within +-1 index of
    the content token's own index, and the chance of that fraction (3 / Ns per token, clipped at the ends).
 
 Without TRAIN_DIR the PCA and mean-pose baselines are skipped.
@@ -164,13 +164,12 @@ def main(argv) -> int:
 def swap_stats(w: np.ndarray) -> dict:
     """Diagnostics of one soft-swap weight matrix ``(Nc, Ns)`` (rows on the simplex)."""
     nc, ns = w.shape
-    ent = -(w * np.log(np.clip(w, 1e-12, None))).sum(-1)
     arg = w.argmax(-1)
     n = np.arange(nc)
     near = np.abs(arg - n) <= 1
     lo, hi = np.clip(n - 1, 0, ns - 1), np.clip(n + 1, 0, ns - 1)
     chance = np.where(n < ns, (hi - lo + 1) / ns, np.where(n - 1 < ns, 1 / ns, 0.0))
-    return {"max_weight": float(w.max(-1).mean()), "effective_tokens": float(np.exp(ent).mean()),
+    return {"max_weight": float(w.max(-1).mean()), "effective_tokens": float((1.0 / np.sum(w ** 2, axis=-1)).mean()),
             "argmax_within_1": float(near.mean()), "chance_within_1": float(chance.mean())}
 
 

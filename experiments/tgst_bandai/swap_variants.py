@@ -8,7 +8,9 @@ dot | scaled) and seed: the autoencoder checkpoint AE_WORKDIR/checkpoints/autoen
 OUT_DIR/<variant>-s<seed>, a transformer is trained on TRAIN_DIR (jaxgest.tgst.train.train with the
 overrides) and the soft-swap weights of every inter pair of EVAL_DIR are summarised (diagnose.swap_stats:
 mean largest weight, effective number of tokens, argmax within +-1 index of the query's own index and its
-chance). Results: OUT_DIR/swap_variants.json and a table on stdout.
+chance). Clips are padded at the end (edge frames) to a multiple of 256 frames to share compilations; the
+rows are cut back to the real content tokens, the style's padding tokens stay among the columns.
+Results: OUT_DIR/swap_variants.json and a table on stdout.
 """
 
 from __future__ import annotations
@@ -29,6 +31,11 @@ from jaxgest.motion import datasets  # noqa: E402
 from jaxgest.tgst import model as tmodel  # noqa: E402
 from jaxgest.tgst.evaluate import make_pairs  # noqa: E402
 from jaxgest.tgst.train import AE_SUBDIR, train  # noqa: E402
+
+
+def bucket(x, multiple=256):
+    """The end replicated up to a multiple of ``multiple`` frames (fewer compilations)."""
+    return np.concatenate([x, np.repeat(x[-1:], -len(x) % multiple, axis=0)])
 
 
 def overrides_of(variant: str) -> dict:
@@ -69,8 +76,11 @@ def main(argv) -> int:
             cfg, params = load_params(wd)
             held = {c.path: body_upper_lower(c.motion, cfg.fps)[0] for c in clips}
             sw = jax.jit(lambda p, c, s: tmodel.swap_weights(p, c[None], s[None], cfg=cfg)[0])
-            stats = [swap_stats(np.asarray(sw(params, held[p.content.path], held[p.style.path])))
-                     for p in make_pairs(clips, "inter")]
+            stats = []
+            for pair in make_pairs(clips, "inter"):
+                c, s = held[pair.content.path], held[pair.style.path]
+                w = np.asarray(sw(params, bucket(c), bucket(s)))  # padded: rows cut to the real tokens
+                stats.append(swap_stats(w[:tmodel.num_tokens(-(-len(c) // 4))]))
             results[name] = {"variant": variant, "seed": seed, "steps": args.steps,
                              "loss": summary["transformer"].get("loss"),
                              "terms": {k: summary["transformer"].get(k) for k in

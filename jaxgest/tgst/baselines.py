@@ -119,12 +119,21 @@ def block_pca_reconstruct(pca: dict, x) -> np.ndarray:
 
 
 def mean_pose_fit(clips) -> np.ndarray:
-    """The mean exp-map per channel over every frame of ``clips`` ``(F_i, C)``: the constant predictor.
+    """The mean pose of ``clips`` ``(F_i, 3J)`` exp-maps: the constant predictor, ``(3J,)``.
 
-    (For the per-joint angle error below, the channel mean of exp-maps is a fine stand-in for the rotation
-    mean: the joints' rotations are concentrated, far from the pi wrap.)
+    Per joint the rotation mean of every frame (the principal eigenvector of sum q q^T over unit quaternions,
+    sign-free), returned as an exp-map. (The channel mean of exp-maps would be wrong for joints near a
+    rotation of pi, where the exp-map jumps to the antipode: the rig's arm and leg frames sit there.)
     """
-    return np.concatenate([np.asarray(c, np.float64) for c in clips], axis=0).mean(0).astype(np.float32)
+    from jaxgest.motion import rotations
+
+    x = np.concatenate([np.asarray(c, np.float64) for c in clips], axis=0)
+    q = np.asarray(rotations.expmap_to_quat(x.reshape(len(x), -1, 3)))  # (N, J, 4)
+    mean = []
+    for j in range(q.shape[1]):
+        _, vecs = np.linalg.eigh(q[:, j].T @ q[:, j])
+        mean.append(vecs[:, -1])
+    return np.asarray(rotations.quat_to_expmap(np.stack(mean)), np.float32).reshape(-1)
 
 
 def per_joint_angle_deg(pred, target) -> np.ndarray:

@@ -37,5 +37,12 @@ def finite(x):
 
 
 assert finite(report["style_transfer"]) and finite(report["timings_s"])
+# the transfer table: the four methods and the two controls, each naming its metric protocol; the controls
+# are exact by construction (the content as is has no content error, the style as is no style error)
+for style, rows in report["style_transfer"].items():
+    assert {"soft", "hard", "adain", "avatarnet", "content_as_is", "style_as_is"} <= set(rows), (style, rows)
+    assert all(r["protocol"] == "authors" for r in rows.values()), style
+    assert rows["content_as_is"]["content"]["worst"] == 0.0 and rows["style_as_is"]["style"]["worst"] == 0.0
+    assert all(r["style"]["mean"] > 0 for m, r in rows.items() if m != "style_as_is"), style
 print(f"demo outputs ok: {len(gifs)} GIFs, {len(files)} BVH files (independent parser), metrics.json "
       f"({report['timings_s']['total_s']:.0f} s)")

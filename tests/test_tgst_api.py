@@ -93,9 +93,10 @@ def test_transfer_all_methods_keep_content_skeleton_and_length(trained, model, m
     out = model.transfer(content, style, method=method)
     assert out.skeleton.names == content.skeleton.names and out.num_frames == content.num_frames
     assert out.fps == content.fps and np.all(np.isfinite(out.rotations))
-    pos = kinematics.forward_kinematics(out)
+    # floor contact at the content's height: the lowest foot/toe joint where the content's is, every frame
     feet = kinematics.foot_joints(out.skeleton)
-    np.testing.assert_allclose(pos[:, feet, 1].min(axis=1), 0.0, atol=1e-6)  # floor contact
+    np.testing.assert_allclose(kinematics.forward_kinematics(out)[:, feet, 1].min(axis=1),
+                               kinematics.forward_kinematics(content)[:, feet, 1].min(axis=1), atol=1e-6)
 
 
 def test_transfer_is_deterministic_and_soft_differs_from_content(trained, model):
@@ -213,3 +214,48 @@ def test_training_the_autoencoder_further_retrains_a_stale_transformer(trained, 
     again = train(data, work, preset="tiny", ae_steps=5, transformer_steps=2, progress=False)
     assert again["stale_transformer"] is None
     assert "autoencoder already at step 5, nothing to do; transformer already at step 2" in format_summary(again)
+
+
+def test_output_keeps_the_contents_floor_contact_height(trained, model):
+    """The content stands with its foot joints 4.25 cm above the floor and leaves the floor for a while (a
+    jump): the output's lowest foot joint stays within 1 cm of the content's on every contact frame (and
+    follows it in the air) instead of sinking to height 0."""
+    data, _, _ = trained
+    content, style = (bvh.load(p) for p in _clips(data)[:2])
+    F = content.num_frames
+    jump = np.where((np.arange(F) > 60) & (np.arange(F) < 90), 20.0 * np.sin(np.pi * (np.arange(F) - 60) / 30), 0.0)
+    lift = 4.25 + jump  # cm above the original per-frame height
+    hips = kinematics.forward_kinematics(content)[:, 0]
+    raised = kinematics.set_root_position(content, hips + lift[:, None] * np.array([0.0, 1.0, 0.0]))
+    feet = kinematics.foot_joints(content.skeleton)
+    c_low = kinematics.forward_kinematics(raised)[:, feet, 1].min(axis=1)
+    contact = c_low < c_low.min() + 1.0  # frames where the content's lowest foot is at its contact height
+    assert contact.sum() > F // 2 and (~contact).sum() >= 20 and c_low.min() > 4.0
+    out = model.transfer(raised, style, method="soft")
+    o_low = kinematics.forward_kinematics(out)[:, feet, 1].min(axis=1)
+    assert np.abs(o_low - c_low)[contact].max() < 1.0
+    np.testing.assert_allclose(o_low, c_low, atol=1e-6)  # per frame, flight phase included
+
+
+@pytest.mark.slow
+def test_batched_transfer_equals_model_transfer_and_reports_swap_weights(trained, model):
+    """jaxgest.tgst.evaluate's in-process transfers: exact shapes give model.transfer's result; buckets pad
+    the clips (edge frames) and cut the result back to the content's frames."""
+    from jaxgest.motion.datasets import Clip
+    from jaxgest.tgst import evaluate as ev
+
+    data, _, _ = trained
+    content, style = (bvh.load(p) for p in _clips(data)[:2])
+    pair = ev.Pair(Clip(content, "c", "neutral", None), Clip(style, "s", "sad", None))
+    exact, diag = ev.BatchedTransfer(model, ("soft",), ratio=1.0).run(pair)
+    direct = model.transfer(content, style, method="soft")
+    np.testing.assert_allclose(exact["soft"].rotations, direct.rotations, atol=2e-5)
+    np.testing.assert_allclose(exact["soft"].translations, direct.translations, atol=1e-3)
+    assert 0 < diag["max_weight"] <= 1 and 1 <= diag["effective_tokens"] <= diag["num_style"] + diag["padding_mass"]
+    frames = style.num_frames  # 60 fps: the model's rate
+    assert diag["num_style"] == (frames // 4 - 4) // 2 + 1 and diag["num_queries"] > 0
+    assert 0 <= diag["chance_within_1"] <= 3 / diag["num_style"]
+    bucketed, bdiag = ev.BatchedTransfer(model, ("soft",), ratio=1.5).run(pair)
+    assert ev.bucket_length(frames, 1.5) > frames  # really padded
+    assert bucketed["soft"].num_frames == content.num_frames and np.all(np.isfinite(bucketed["soft"].rotations))
+    assert bdiag["num_style"] == diag["num_style"] and 0 <= bdiag["padding_mass"] < 1

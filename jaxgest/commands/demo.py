@@ -33,6 +33,8 @@ PLANS = {
 }
 CONTENT, OTHER_CONTENT = "greeting", "directions"  # first two contents of the plan (content-major)
 NEUTRAL, STYLES = "neutral", ("energetic", "sad")
+#: metric protocol of the transfer table (jaxgest.tgst.evaluate.PROTOCOLS; the paper tables' default)
+TRANSFER_PROTOCOL = "authors"
 
 
 def register(subparsers) -> None:
@@ -150,7 +152,7 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     timings["zeggs_train_s"] = time.perf_counter() - t
 
     # ---- (a) style transfer of a neutral clip to two styles, all four methods
-    t = step(f"3/6 style transfer: '{CONTENT}' ({NEUTRAL}) -> {', '.join(STYLES)}, methods {', '.join(METHODS)}")
+    t = step(f"3/6 style transfer: '{CONTENT}' ({NEUTRAL}) -> {', '.join(STYLES)}, methods {', '.join(tev.TRANSFER_METHODS)}")
     tgst = load_tgst(out / "tgst")
     content, _ = _clip(data, CONTENT, NEUTRAL)
     transfer = {}
@@ -158,12 +160,17 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
         style, _ = _clip(data, OTHER_CONTENT, style_name)  # another content: unaligned, inter-scenario
         truth, _ = _clip(data, CONTENT, style_name)  # the content performed in the style: ground truth
         panels, titles, per_method = [content, style], [f"content ({NEUTRAL})", f"style ({style_name})"], {}
-        for method in METHODS:
+        for method in tev.TRANSFER_METHODS:
             result = tgst.transfer(content, style, method=method, name=f"{CONTENT}_{style_name}_{method}")
             bvh.save(result, results / f"transfer_{style_name}_{method}.bvh")
-            per_method[method] = tev.clip_errors(result, content, style, truth)
+            per_method[method] = dict(tev.clip_errors(result, content, style, truth, protocol=TRANSFER_PROTOCOL),
+                                      protocol=TRANSFER_PROTOCOL)
             panels.append(result)
             titles.append(method)
+        # controls under the same protocol: the content clip and the style clip themselves as the "result"
+        for control, clip in (("content_as_is", content), ("style_as_is", style)):
+            per_method[control] = dict(tev.clip_errors(clip, content, style, truth, protocol=TRANSFER_PROTOCOL),
+                                       protocol=TRANSFER_PROTOCOL)
         panels.append(truth)
         titles.append("ground truth")
         render_gif(panels, results / f"transfer_{style_name}.gif", titles=titles, max_seconds=plan["gif_seconds"])
@@ -224,7 +231,10 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
         "timings_s": timings,
         "notes": {
             "errors": "mean over frames; content = DTW hand error (m) vs the content clip, style = arm-velocity "
-                      "window statistics error (m/s) vs the style clip, gt_* = vs the ground-truth clip",
+                      "window statistics error (m/s) vs the style clip, gt_* = vs the ground-truth clip; "
+                      "content_as_is / style_as_is = the content / style clip itself as the result (controls); "
+                      f"protocol '{TRANSFER_PROTOCOL}' (jaxgest tgst evaluate --protocol): root-local positions, "
+                      "1 s cut at both ends, forward differences, style clip + its mirror",
             "beat_alignment": "BeatAlign of hand-speed minima vs audio onsets; 'shuffled' = circularly shifted "
                               "onsets (control)",
             "scale": "tiny models trained for a few minutes: a smoke check, not the papers' results",
@@ -240,13 +250,15 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
 
 
 def summary_table(report: dict) -> str:
-    lines = ["", "style transfer of a neutral clip (errors: lower is better; gt = against the true clip)", "",
-             "| style | method | content err (m) | style err (m/s) | gt content (m) | gt style (m/s) |",
-             "|---|---|---:|---:|---:|---:|"]
+    lines = ["", "style transfer of a neutral clip (errors: lower is better; gt = against the true clip; "
+             "controls: the content / style clip as is)", "",
+             "| style | method | protocol | content err (m) | style err (m/s) | gt content (m) | gt style (m/s) |",
+             "|---|---|---|---:|---:|---:|---:|"]
     for style, per in report["style_transfer"].items():
         for method, e in per.items():
-            lines.append(f"| {style} | {method} | {e['content']['mean']:.3f} | {e['style']['mean']:.3f} | "
-                         f"{e['gt_content']['mean']:.3f} | {e['gt_style']['mean']:.3f} |")
+            label = method.replace("_as_is", " as is (control)")
+            lines.append(f"| {style} | {label} | {e.get('protocol', '-')} | {e['content']['mean']:.3f} | "
+                         f"{e['style']['mean']:.3f} | {e['gt_content']['mean']:.3f} | {e['gt_style']['mean']:.3f} |")
     lines += ["", "speech-driven generation (BeatAlign: higher is better)", "",
               "| style | BeatAlign | shuffled control |", "|---|---:|---:|"]
     for label, b in report["generation"]["beat_alignment"].items():

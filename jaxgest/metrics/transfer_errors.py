@@ -17,6 +17,8 @@ Choices where the paper is open (SPEC §5), all documented in the functions:
     1.4 on one Bandai-Namco pair, 8 arm joints in m/s, here); ``joint_dims=None`` gives one L2 norm over all
     channels (eq. 15 as literally written);
   * ``trim`` (default 0) cuts frames at both ends; the authors' code cuts 60 frames (1 s at 60 fps).
+    :mod:`jaxgest.tgst.evaluate` applies its protocol (trim, root-local positions, forward differences,
+    mirrored style) to the features before calling these functions.
 
 References: Kuriyama et al. 2022, §4.2, eqs. 13-16.
 """
@@ -182,21 +184,24 @@ def _world(world_positions, name: str) -> np.ndarray:
 
 
 def arm_velocities(
-    world_positions, fps: float, joint_indices: Sequence[int], *, scale: float = 1.0
+    world_positions, fps: float, joint_indices: Sequence[int], *, scale: float = 1.0, forward: bool = False
 ) -> np.ndarray:
-    """Per-second velocities of the chosen joints, flattened: ``(F, J, 3) -> (F, 3 * len(joint_indices))``.
+    """Per-second velocities of the chosen joints, flattened: ``(F, J, 3) -> (F', 3 * len(joint_indices))``.
 
-    :func:`jaxgest.motion.kinematics.joint_velocities` (backward differences v_t = (p_t - p_{t-1}) * fps,
-    frame 0 repeats frame 1) of the joints in ``joint_indices`` (in order; channels are
-    [j0 xyz, j1 xyz, ...]), times ``scale`` (0.01 for centimetres -> metres per second). The authors' code
-    uses the F - 1 forward differences; the repeated first frame only enters the first style window.
-    References: Kuriyama et al. 2022, §4.2 (velocities of the arm joints; authors' code: 60 * frame diff).
+    ``forward=True`` (the authors' protocol): the F' = F - 1 forward differences
+    v_t = (p_{t+1} - p_t) * fps (:func:`jaxgest.motion.kinematics.forward_differences`; the authors' code
+    takes 60 * frame differences at 60 fps). ``forward=False`` (the world protocol, as before): F' = F
+    backward differences with frame 0 repeating frame 1 (:func:`jaxgest.motion.kinematics.joint_velocities`),
+    so a first-frame spike enters twice. Joints in ``joint_indices`` order (channels [j0 xyz, j1 xyz, ...]),
+    times ``scale`` (0.01 for centimetres -> metres per second). Positions may be world or root-local.
+    References: Kuriyama et al. 2022, §4.2 (velocities of the arm joints); the authors' evaluator.py.
     """
     p = _world(world_positions, "arm_velocities")
     if len(p) < 2:
         raise DataError(f"arm_velocities: need at least 2 frames, got {len(p)}")
     idx = np.asarray(joint_indices, np.int64)
-    v = kinematics.joint_velocities(p[:, idx], float(fps)) * float(scale)
+    diff = kinematics.forward_differences if forward else kinematics.joint_velocities
+    v = diff(p[:, idx], float(fps)) * float(scale)
     return v.reshape(len(v), -1)
 
 

@@ -1,5 +1,9 @@
 """Forward kinematics, mirroring, root-yaw removal/restoration, floor contact, velocities (SPEC §2).
 
+Also the pieces of the authors' evaluation protocol (SPEC §5): :func:`root_local_positions` (root at the
+origin, root rotation reset), :func:`forward_differences` and :func:`append_motion` (the mirrored style clip
+appended with a short slerp transition).
+
 Motion-level functions take and return :class:`~jaxgest.motion.skeleton.Motion` and compute in NumPy
 float64 (exact file-level numbers). :func:`fk_positions` is the batched ``jax.numpy`` version for use
 inside jit (losses, features); its parent array is static.
@@ -54,6 +58,23 @@ def global_rotations(motion: Motion) -> np.ndarray:
     return global_transforms(motion)[0]
 
 
+def root_local_positions(motion: Motion, root: str | None = None) -> np.ndarray:
+    """Joint positions ``(F, J, 3)`` with the root at the origin and its rotation reset (file units).
+
+    ``p'_j = G_root^-1 (p_j - p_root)``: forward kinematics with the root's translation zeroed and its world
+    rotation set to the identity, i.e. every joint in the frame of the root. The root is the hips (the first
+    joint below the file root with several children: ``Hips`` of Bandai-Namco, below its static
+    ``joint_Root``, and of ZEGGS) unless ``root`` names another joint. Joints above the root get the same
+    transform (they are static wrappers on both datasets).
+    References: the authors' evaluator (``get_joint_positions(root_positions=None)`` in dataset/mocap.py:
+    "We also reset orientation of root"); SPEC §5 (authors' protocol).
+    """
+    r, _ = _root_and_parent(motion.skeleton, root)
+    grot, gpos = global_transforms(motion)
+    inv = R.quat_inv(grot[:, r])[:, None, :]
+    return R.quat_rotate(np.broadcast_to(inv, grot.shape), gpos - gpos[:, r : r + 1])
+
+
 def fk_positions(rotations: jax.Array, translations: jax.Array, parents: Sequence[int]) -> jax.Array:
     """Batched jnp forward kinematics: ``(..., J, 4)``, ``(..., J, 3)`` -> world positions ``(..., J, 3)``.
 
@@ -104,6 +125,45 @@ def joint_velocities(positions: np.ndarray, fps: float) -> np.ndarray:
     v[1:] = (positions[1:] - positions[:-1]) * fps
     v[0] = v[1]
     return v
+
+
+def forward_differences(positions: np.ndarray, fps: float) -> np.ndarray:
+    """Per-second velocities ``(F - 1, ..., 3)``: ``v_t = (p_{t+1} - p_t) * fps`` for t = 0 .. F - 2.
+
+    No frame is repeated or invented (unlike :func:`joint_velocities`), so every velocity is the exact
+    displacement of one frame step: a constant-speed motion gives that speed at both ends.
+    References: the authors' evaluator (``60. * (x[1:] - x[:-1])`` in evaluator.py); SPEC §5.
+    """
+    positions = np.asarray(positions, np.float64)
+    if len(positions) < 2:
+        raise DataError(f"forward differences need at least 2 frames, got {len(positions)}")
+    return (positions[1:] - positions[:-1]) * float(fps)
+
+
+def append_motion(first: Motion, second: Motion, transition: int = 0) -> Motion:
+    """``first`` followed by ``second`` (same skeleton and rate), blended over ``transition`` frames.
+
+    The last ``transition`` frames of ``first`` move linearly toward the first ``transition`` frames of
+    ``second`` (slerp of rotations, lerp of translations, weight k / transition at the k-th of them), then
+    ``second`` continues from its frame ``transition``: ``Fa + Fb - transition`` frames. ``transition`` is
+    clamped to both lengths. Used to append the mirrored style clip as the authors' evaluator does
+    (``MocapClip.append(mirrored, transit=True, period=30)`` at 60 fps).
+    References: the authors' dataset/mocap.py (``add_mirror_motion``, ``append``); SPEC §5.
+    """
+    if first.skeleton.num_joints != second.skeleton.num_joints:
+        raise DataError("append_motion: the clips have different skeletons")
+    n = max(0, min(int(transition), first.num_frames, second.num_frames))
+    rot_a, tr_a = first.rotations.copy(), first.translations.copy()
+    if n:
+        w = (np.arange(n) / n)[:, None]
+        a_idx = slice(first.num_frames - n, first.num_frames)
+        q_a, q_b = rot_a[a_idx], second.rotations[:n]
+        rot_a[a_idx] = R.quat_slerp(q_a, q_b, np.broadcast_to(w, q_a.shape[:2]))
+        tr_a[a_idx] = (1.0 - w[..., None]) * tr_a[a_idx] + w[..., None] * second.translations[:n]
+    return first.replace(
+        rotations=np.concatenate([rot_a, second.rotations[n:]]),
+        translations=np.concatenate([tr_a, second.translations[n:]]),
+    )
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -310,22 +370,33 @@ def foot_joints(skeleton: Skeleton) -> list[int]:
     return [i for i, n in enumerate(skeleton.names) if any(h in n.lower() for h in FOOT_HINTS)]
 
 
-def floor_contact(motion: Motion, feet: Sequence[str] | None = None, root: str | None = None) -> Motion:
-    """Set the root's height per frame so the lowest foot/toe joint touches the floor (height 0).
-
-    References: Kuriyama et al. 2022, §3.1 ("determines the root position at each frame to fix the lower
-    foot position on a floor level, using forward kinematics").
-    """
+def lowest_foot_height(motion: Motion, feet: Sequence[str] | None = None) -> np.ndarray:
+    """Height ``(F,)`` of the lowest foot/toe joint per frame (file units, the skeleton's up axis)."""
     sk = motion.skeleton
     idx = [sk.index(n) for n in feet] if feet else foot_joints(sk)
     if not idx:
         raise DataError(f"skeleton {', '.join(sk.names[:4])}, ... has no foot/toe joints to put on the floor")
+    return forward_kinematics(motion)[:, idx, sk.up_axis].min(axis=1)
+
+
+def floor_contact(motion: Motion, feet: Sequence[str] | None = None, root: str | None = None,
+                  height=0.0) -> Motion:
+    """Set the root's height per frame so the lowest foot/toe joint is at ``height`` (default the floor, 0).
+
+    ``height``: a number or ``(F,)`` per-frame heights, e.g. :func:`lowest_foot_height` of the clip a
+    transfer performs, so the result keeps that clip's contact height (a foot joint of a standing
+    Bandai-Namco actor sits 4.25 cm above the floor) and its jumps. Only the root's vertical
+    coordinate changes.
+    References: Kuriyama et al. 2022, §3.1 ("determines the root position at each frame to fix the lower
+    foot position on a floor level, using forward kinematics").
+    """
+    sk = motion.skeleton
     r, p = _root_and_parent(sk, root)
     up = sk.up_axis
-    pos = forward_kinematics(motion)
-    lowest = pos[:, idx, up].min(axis=1)  # (F,)
+    lowest = lowest_foot_height(motion, feet)  # (F,)
+    target = np.broadcast_to(np.asarray(height, np.float64), lowest.shape)
     shift = np.zeros((motion.num_frames, 3))
-    shift[:, up] = -lowest
+    shift[:, up] = target - lowest
     trans = motion.translations.copy()
     if p >= 0:
         grot = global_rotations(motion)

@@ -12,8 +12,11 @@ synthetic body), following §3.1 of the paper:
 2. the jit-compiled :func:`jaxgest.tgst.model.transfer_arrays` (encode both, tokens, transformer, swap,
    cross-fade, both decoders) gives upper and lower exp-maps of the content's length;
 3. the result is resampled back to the content's frame times (quaternion slerp), written onto the content's
-   skeleton with the content's root yaw and horizontal root path, and the root height is set so the lowest
-   foot/toe joint touches the floor (:func:`jaxgest.motion.body.body_to_motion`).
+   skeleton with the content's root yaw and horizontal root path (:func:`jaxgest.motion.body.body_to_motion`),
+   and the root height is set per frame so the lowest foot/toe joint is where the content's lowest foot/toe
+   joint is on that frame (:meth:`TGSTModel.to_motion`): the result keeps the content's contact height
+   (4.25 cm for the foot joints of a standing Bandai-Namco actor, not 0) and leaves the floor when the
+   content does.
 
 The output has the content's skeleton, frame count and frame rate. Joints outside the 21-joint body (e.g.
 ZEGGS fingers) keep the content's rotations.
@@ -32,6 +35,7 @@ import numpy as np
 
 from jaxgest.errors import CheckpointError, DataError
 from jaxgest.motion import body, datasets
+from jaxgest.motion import kinematics as K
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion
 from jaxgest.tgst.config import TGSTConfig, config_from_dict, get_config
@@ -111,17 +115,45 @@ class TGSTModel:
         up, lo, _ = fn(self.params, np.asarray(content_upper)[None], np.asarray(style_upper)[None])
         return np.asarray(up[0]), np.asarray(lo[0])
 
+    def to_motion(self, upper: np.ndarray, lower: np.ndarray, content: Motion) -> Motion:
+        """Body exp-maps at the model rate ``(F', 39)``, ``(F', 24)`` -> a Motion on ``content``'s skeleton.
+
+        Resampled to the content's frame times, written with the content's root yaw and horizontal path,
+        the root height set per frame so the lowest foot/toe joint is at the content's lowest foot/toe
+        height on that frame (:func:`content_floor_contact`).
+        References: Kuriyama et al. 2022, §3.1 (root position by forward kinematics from the feet).
+        """
+        F = content.num_frames
+        up = resample_body(upper, self.cfg.fps, content.fps, F)
+        lo = resample_body(lower, self.cfg.fps, content.fps, F)
+        return content_floor_contact(body.body_to_motion(up, lo, content, floor=False), content)
+
     def transfer(self, content: Motion, style: Motion, method: str = "soft", name: Optional[str] = None) -> Motion:
         """``content`` performed in the style of ``style``, on the content's skeleton (module docstring)."""
         _check_method(method)
         cu = self.body_arrays(content, "content")
         su = self.body_arrays(style, "style")
         up, lo = self.transfer_body(cu, su, method)
-        F = content.num_frames
-        up = resample_body(up, self.cfg.fps, content.fps, F)
-        lo = resample_body(lo, self.cfg.fps, content.fps, F)
-        out = body.body_to_motion(up, lo, content, floor=True)
+        out = self.to_motion(up, lo, content)
         return out.replace(name=name or f"{content.name or 'content'} in the style of {style.name or 'style'}")
+
+
+def foot_names(skeleton) -> list[str]:
+    """The rig's foot and toe joints of the 21-joint body (``body.FEET`` through its joint map)."""
+    joints = body.load_map(body.detect_map(skeleton))["joints"]
+    return [joints[n] for n in body.FEET]
+
+
+def content_floor_contact(result: Motion, content: Motion) -> Motion:
+    """``result`` with its root height set per frame so its lowest foot/toe joint is at the height of
+    ``content``'s lowest foot/toe joint on that frame (same skeleton and frame count).
+
+    Keeps the content's contact height (its foot joints' height above the floor when standing) on contact
+    frames and its flight phases where it leaves the floor; only the root's vertical coordinate changes.
+    References: Kuriyama et al. 2022, §3.1 (root position by forward kinematics from the feet).
+    """
+    feet = foot_names(content.skeleton)
+    return K.floor_contact(result, feet=feet, height=K.lowest_foot_height(content, feet))
 
 
 def load_model(workdir) -> TGSTModel:
@@ -171,4 +203,5 @@ def transfer(content: Motion, style: Motion, *, workdir, method: str = "soft") -
     return load_model(workdir).transfer(content, style, method=method)
 
 
-__all__ = ["METHODS", "TGSTModel", "compiled_transfer", "count_params", "load_model", "resample_body", "transfer"]
+__all__ = ["METHODS", "TGSTModel", "compiled_transfer", "content_floor_contact", "count_params", "foot_names",
+           "load_model", "resample_body", "transfer"]

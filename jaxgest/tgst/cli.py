@@ -77,11 +77,12 @@ def _transfer(args) -> int:
 
 def _evaluate(args) -> int:
     from jaxgest.io import check_output_path
-    from jaxgest.tgst.evaluate import evaluate, markdown_table, metric_validity, validity_table
+    from jaxgest.tgst.evaluate import (diagnostics_table, evaluate, markdown_table, metric_validity,
+                                       validity_table)
     from jaxgest.training import write_json_atomic
 
     check_output_path(args.json)
-    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    methods = None if args.methods is None else tuple(m.strip() for m in args.methods.split(",") if m.strip())
     contents = None if args.contents is None else [c.strip() for c in args.contents.split(",") if c.strip()]
     report = evaluate(
         args.workdir,
@@ -91,6 +92,9 @@ def _evaluate(args) -> int:
         max_pairs=args.max_pairs,
         contents=contents,
         seed=args.seed,
+        protocol=args.protocol,
+        trim_seconds=args.trim,
+        bucket=args.bucket,
     )
     if args.validity:
         report["metric_validity"] = metric_validity(
@@ -99,10 +103,18 @@ def _evaluate(args) -> int:
             max_pairs=args.max_pairs,
             contents=contents,
             seed=args.seed,
+            protocol=args.protocol,
+            trim_seconds=args.trim,
         )
     write_json_atomic(args.json, report)
-    print(f"{report['pairs']} pairs: {report['num_pairs']} (data {report['data']})")
+    t = report["timing"]
+    print(f"{report['pairs']} pairs: {report['num_pairs']} (data {report['data']}); protocol "
+          f"{report['protocol']['name']}; {t['wall_s']:.0f} s wall, {t['cpu_s']:.0f} s CPU")
     print(markdown_table(report))
+    diag = diagnostics_table(report)
+    if diag:
+        print()
+        print(diag)
     if args.validity:
         print()
         print(validity_table(report["metric_validity"]))
@@ -111,7 +123,7 @@ def _evaluate(args) -> int:
 
 def register_evaluate(tgst_subparsers) -> None:
     """Add ``evaluate`` to the ``jaxgest tgst`` subcommands (SPEC §6): paper Tables 2-3 (and 1)."""
-    from jaxgest.tgst.evaluate import PAIR_MODES
+    from jaxgest.tgst.evaluate import DEFAULT_BUCKET, PAIR_MODES, PROTOCOLS, TRANSFER_METHODS
 
     p = tgst_subparsers.add_parser(
         "evaluate", help="content/style errors of style transfers (paper Tables 2-3)"
@@ -120,10 +132,20 @@ def register_evaluate(tgst_subparsers) -> None:
     p.add_argument("--data", required=True, help="dataset folder (Bandai-Namco, ZEGGS or manifest.csv)")
     p.add_argument("--json", required=True, help="output JSON file")
     p.add_argument("--pairs", choices=PAIR_MODES, default="intra", help="intra-, inter-scenario or all pairs")
-    p.add_argument("--methods", default=",".join(METHODS), help="comma-separated methods (default: all four)")
-    p.add_argument("--max-pairs", type=int, default=None, help="evaluate a seeded random subset of pairs")
+    p.add_argument("--methods", default=None,
+                   help=f"comma-separated methods (default: {','.join(TRANSFER_METHODS)}; also: autoencoder)")
+    p.add_argument("--protocol", choices=tuple(PROTOCOLS), default="authors",
+                   help="authors (default, paper tables): root-local positions, forward differences, 1 s cut at "
+                   "both ends, mirrored style appended; world: world positions, no cut, no mirror")
+    p.add_argument("--trim", type=float, default=None, metavar="SECONDS",
+                   help="override the protocol's cut at both ends (authors: 1 s); named in the report")
+    p.add_argument("--max-pairs", type=int, default=None,
+                   help="evaluate a seeded random subset of pairs (0 or omitted: all pairs)")
     p.add_argument("--contents", default=None, help="comma-separated content labels of the content clips")
     p.add_argument("--seed", type=int, default=0, help="seed of the pair subset")
+    p.add_argument("--bucket", type=float, default=DEFAULT_BUCKET,
+                   help=f"length-bucket ratio of the batched transfers (default {DEFAULT_BUCKET}; "
+                   "1 = exact per-pair shapes, one compilation per pair)")
     p.add_argument(
         "--validity",
         action="store_true",

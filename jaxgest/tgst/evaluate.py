@@ -1,25 +1,56 @@
 """Quantitative evaluation of TGST style transfer (paper 000 §4.2-4.3, Tables 1-3; SPEC §5).
 
-* :func:`clip_errors` -- content error (eqs. 13-14, both hands, exact DTW) and style error (eqs. 15-16,
-  arm-joint velocities) of one transferred clip, plus the same two errors against the ground-truth clip
-  (the content performed in the target style) where the dataset has one (beyond the paper, SPEC §5).
-* :func:`make_pairs` -- content/style evaluation pairs: intra-scenario (style clip of the same content),
-  inter-scenario (of another content) or all.
-* :func:`evaluate` -- per-method averages over pairs of mean / worst / w25 (Tables 2 and 3).
-* :func:`metric_validity` -- Table 1: the errors of the content clip itself and of the style clip, both
-  against the referential ground-truth sample.
-* :func:`register_evaluate` -- ``jaxgest tgst evaluate`` (SPEC §6).
+* :class:`Protocol` / :data:`PROTOCOLS` -- how clips become metric features: ``authors`` (default, the
+  paper tables) or ``world`` (ground-truth checks; the protocol of earlier runs).
+* :func:`clip_features` / :func:`clip_errors` -- content error (eqs. 13-14, both hands, exact DTW) and style
+  error (eqs. 15-16, arm-joint velocities) of one transferred clip, plus the same two errors against the
+  ground-truth clip (the content performed in the target style) where the dataset has one (SPEC §5).
+* :func:`make_pairs` -- content/style evaluation pairs: intra-scenario, inter-scenario or all.
+* :func:`evaluate` -- per-method averages over pairs of mean / worst / w25 (Tables 2 and 3), the controls
+  "content as is" and "style as is", and swap diagnostics. Transfers run in-process, bucketed by clip
+  length (:class:`BatchedTransfer`), so a whole dataset costs a few compilations.
+* :func:`metric_validity` -- Table 1: the content clip and the style clip, each against the referential
+  ground-truth sample.
+* :func:`swap_diagnostics` -- how the soft swap blends: mean max weight, effective number of blended style
+  tokens, fraction of argmax within +-1 token of the query's own index and its chance level.
+
+The ``authors`` protocol (the authors' evaluator.py and dataset/mocap.py; SPEC §5):
+
+* positions by forward kinematics with the root (the hips) at the origin and its rotation reset
+  (:func:`jaxgest.motion.kinematics.root_local_positions`, ``get_joint_positions(root_positions=None)``);
+* 1 s cut at both ends of every clip (60 frames at their 60 fps; round(fps) frames here, 30 on Bandai-Namco),
+  before velocities; the content error compares the cut content with the cut transfer (their
+  ``content[cut:-cut]`` / ``transfer[cut:-cut]``);
+* velocities as the F - 1 forward differences x fps;
+* every clip a transfer is compared with for *style* (the style clip; the ground truth in the gt and Table 1
+  columns) is that clip followed by its mirror image (:func:`jaxgest.motion.kinematics.mirror`), blended over
+  0.5 s (their 30 frames at 60 fps, ``append(..., transit=True, period=30)``). As in their evaluator the model
+  itself is given the style clip as is (their ``one_batch_tensor`` is packed before the mirror is appended).
+* joints: both hands for the content error (their effector indices 7, 11 = LHand, RHand of their 13-joint
+  upper body), the 8 arm joints (shoulder, upper arm, forearm, hand x L, R; their indices 4-11) for the
+  style error; the 21-joint body's Hand_L/R and body.ARMS here, through the rig's joint map.
+* window theta = 128 frames at 60 fps scaled with the rate (64 at 30 fps), hop theta/2.
+
+Kept from the metric functions (:mod:`jaxgest.metrics.transfer_errors`), where the authors' code differs:
+exact DTW instead of FastDTW; every full window (their ``range(0, F - theta, h)`` drops the last full window
+when F - theta is a multiple of h); w25 = mean of the ceil(25 %) largest components (theirs: floor(n/4), NaN
+below 4 components). Both protocols scale the cut with the clip rate.
+
+The ``world`` protocol: world positions (root path and rotation included), backward differences with the
+first velocity repeated, no cut, no mirror -- the numbers of earlier runs. Every report, table row and
+summary names its protocol.
 
 Units: BVH positions of both datasets and of the synthetic data are centimetres; hands are compared in
-metres and velocities in metres per second, at the result's frame rate (a style clip at another rate is
-resampled to it). The style window is theta = 128 frames at 60 fps scaled with the rate
-(:func:`jaxgest.metrics.window_for_fps`; 64 at Bandai-Namco's 30 fps), hop floor(theta / 2); no frames are
-trimmed (the authors' code cuts 60 frames at both ends).
+metres and velocities in metres per second, at the result's frame rate (a clip at another rate is
+resampled to it).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import math
+import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -28,21 +59,96 @@ from jaxgest import metrics
 from jaxgest.errors import DataError
 from jaxgest.motion import body, kinematics
 from jaxgest.motion.skeleton import Motion
-from jaxgest.tgst.model import METHODS
+from jaxgest.tgst import model as tgst_model
 
+#: every ``method=`` the model accepts
+METHODS = tgst_model.METHODS
+#: the four methods of the paper's tables (default of :func:`evaluate`)
+TRANSFER_METHODS = getattr(tgst_model, "TRANSFER_METHODS", tuple(m for m in METHODS if m != "autoencoder"))
 PAIR_MODES = ("intra", "inter", "all")
 NEUTRAL = ("normal", "neutral")
 STATS = ("mean", "worst", "w25")
 ERROR_KEYS = ("content", "style", "gt_content", "gt_style")
+CONTROLS = ("content_as_is", "style_as_is")
 CM_TO_M = 0.01
-NOTES = {
-    "content": "eqs. 13-14: both hands' world positions in metres, exact DTW (not FastDTW); mean/worst/w25",
-    "style": "eqs. 15-16: arm-joint (8) velocities in m/s, sum over joints of ||dmean|| + ||dstd||, theta = 128 "
-    "frames at 60 fps scaled with the rate, hop theta/2, no trimming; mean/worst/w25",
-    "w25": "mean of the ceil(25%) largest components (at least one)",
-    "gt": "gt_content / gt_style: the same errors with the dataset clip of the content in the target style",
-    "averages": "each statistic averaged over the evaluated pairs (paper Tables 2/3)",
+DEFAULT_BUCKET = 1.25
+
+
+# --------------------------------------------------------------------------------------------------------
+# Protocols
+
+
+@dataclasses.dataclass(frozen=True)
+class Protocol:
+    """How a clip becomes metric features (module docstring). Hashable; ``name`` labels every number."""
+
+    name: str
+    root_local: bool  # positions with the root at the origin and its rotation reset
+    trim_seconds: float  # cut at both ends (round(trim_seconds * fps) frames)
+    forward_differences: bool  # F - 1 forward differences (else F backward, the first repeated)
+    mirror_style: bool  # style references are the clip followed by its mirror
+    transition_seconds: float = 0.5  # blend between a style reference and its mirror
+
+    def trim_frames(self, fps: float) -> int:
+        return int(math.floor(self.trim_seconds * float(fps) + 0.5))
+
+    def transition_frames(self, fps: float) -> int:
+        return int(math.floor(self.transition_seconds * float(fps) + 0.5))
+
+    @property
+    def label(self) -> str:
+        """``name`` plus any setting that differs from the named protocol (e.g. ``authors(trim 0.5 s)``)."""
+        base = PROTOCOLS.get(self.name)
+        if base is None or base == self:
+            return self.name
+        diffs = [f"{f.name}={getattr(self, f.name)}" for f in dataclasses.fields(self)
+                 if f.name != "name" and getattr(self, f.name) != getattr(base, f.name)]
+        if [d.split("=")[0] for d in diffs] == ["trim_seconds"]:
+            return f"{self.name}(trim {self.trim_seconds:g} s)"
+        return f"{self.name}({', '.join(diffs)})"
+
+    def describe(self) -> dict:
+        return {"name": self.label, **{f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                                        if f.name != "name"}}
+
+
+PROTOCOLS = {
+    "authors": Protocol("authors", root_local=True, trim_seconds=1.0, forward_differences=True, mirror_style=True),
+    "world": Protocol("world", root_local=False, trim_seconds=0.0, forward_differences=False, mirror_style=False),
 }
+
+
+def get_protocol(protocol="authors", trim_seconds: float | None = None) -> Protocol:
+    """A :class:`Protocol` from its name (or itself), with the cut optionally overridden (seconds >= 0)."""
+    if isinstance(protocol, Protocol):
+        p = protocol
+    elif protocol in PROTOCOLS:
+        p = PROTOCOLS[protocol]
+    else:
+        raise DataError(f"evaluate: unknown protocol {protocol!r} (choose from {', '.join(PROTOCOLS)})")
+    if trim_seconds is not None:
+        if not (trim_seconds >= 0 and math.isfinite(trim_seconds)):
+            raise DataError(f"evaluate: --trim must be >= 0 seconds, got {trim_seconds}")
+        p = dataclasses.replace(p, trim_seconds=float(trim_seconds))
+    return p
+
+
+def _notes(protocol: Protocol) -> dict:
+    cut = f"{protocol.trim_seconds:g} s cut at both ends" if protocol.trim_seconds else "no cut"
+    pos = "root-local positions (root at the origin, root rotation reset)" if protocol.root_local \
+        else "world positions"
+    vel = "F-1 forward differences" if protocol.forward_differences else "backward differences, v[0] = v[1]"
+    mirror = "style references = clip + its mirror (0.5 s blend)" if protocol.mirror_style else "no mirror"
+    return {
+        "protocol": f"{protocol.label}: {pos}; {vel}; {cut}; {mirror}",
+        "content": "eqs. 13-14: both hands' positions in metres, exact DTW (not FastDTW); mean/worst/w25",
+        "style": "eqs. 15-16: arm-joint (8) velocities in m/s, sum over joints of ||dmean|| + ||dstd||, theta = 128 "
+        "frames at 60 fps scaled with the rate, hop theta/2; mean/worst/w25",
+        "w25": "mean of the ceil(25%) largest components (at least one)",
+        "gt": "gt_content / gt_style: the same errors with the dataset clip of the content in the target style",
+        "controls": "content_as_is / style_as_is: the content clip / the style clip itself taken as the result",
+        "averages": "each statistic averaged over the evaluated pairs (paper Tables 2/3)",
+    }
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -55,27 +161,59 @@ def _joint_indices(motion: Motion, names: Sequence[str]) -> list[int]:
     return [sk.index(joints[n]) for n in names]
 
 
-def clip_features(motion: Motion, fps: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``(hands (F, 6) m, arm velocities (F, 24) m/s)`` of a motion on any mapped rig, at ``fps``.
+def style_reference(motion: Motion, protocol="authors") -> Motion:
+    """The clip a transfer's *style* is compared with: ``motion`` followed by its mirror (0.5 s blend) under
+    a protocol with ``mirror_style``, else ``motion`` itself.
 
-    Hands: world positions of body.HANDS (left, right); arms: per-second velocities of body.ARMS (8 joints),
-    both mapped to the rig's joint names through its joint map, positions in cm -> m. ``fps`` (default the
-    motion's) resamples the motion first so velocities and windows compare at one rate.
-    References: Kuriyama et al. 2022, §4.2 (6-D hand positions in metres; velocities of arm joints).
+    References: the authors' evaluator (``setup_mirror_motions``); Kuriyama et al. 2022, §4.1 ("style
+    gesture is augmented by computing mirror symmetry" in the evaluation phase).
     """
+    p = get_protocol(protocol)
+    if not p.mirror_style:
+        return motion
+    return kinematics.append_motion(motion, kinematics.mirror(motion), p.transition_frames(motion.fps))
+
+
+def clip_features(motion: Motion, fps: float | None = None, protocol="authors",
+                  reference: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """``(hands (F', 6) m, arm velocities (F'', 24) m/s)`` of a motion on any mapped rig, under ``protocol``.
+
+    Hands: positions of body.HANDS (left, right); arms: per-second velocities of body.ARMS (8 joints),
+    mapped to the rig's joint names through its joint map, positions in cm -> m. ``fps`` (default the
+    motion's) resamples the motion first so velocities and windows compare at one rate. ``reference``: the
+    clip is a style reference (:func:`style_reference`: followed by its mirror under the authors' protocol).
+    Under the authors' protocol F' = F - 2 cut and F'' = F' - 1; under ``world`` F' = F'' = F.
+    Raises DataError (naming the clip) when it is too short for the cut.
+    References: Kuriyama et al. 2022, §4.2 (6-D hand positions in metres; velocities of arm joints); the
+    authors' evaluator.py; SPEC §5.
+    """
+    p = get_protocol(protocol)
     if fps is not None and abs(float(fps) - motion.fps) > 1e-9:
         from jaxgest.motion.datasets import resample_motion
 
         motion = resample_motion(motion, float(fps))
-    pos = kinematics.forward_kinematics(motion)
+    if reference:
+        motion = style_reference(motion, p)
+    pos = kinematics.root_local_positions(motion) if p.root_local else kinematics.forward_kinematics(motion)
+    cut = p.trim_frames(motion.fps)
+    if cut:
+        if len(pos) <= 2 * cut + 1:
+            raise DataError(f"{motion.name or 'clip'}: {len(pos)} frames is too short to cut {cut} frames at "
+                            f"both ends ({p.label} protocol)")
+        pos = pos[cut:-cut]
     hands = metrics.hands_metres(pos, _joint_indices(motion, body.HANDS))
-    arms = metrics.arm_velocities(pos, motion.fps, _joint_indices(motion, body.ARMS), scale=CM_TO_M)
+    arms = metrics.arm_velocities(pos, motion.fps, _joint_indices(motion, body.ARMS), scale=CM_TO_M,
+                                  forward=p.forward_differences)
     return hands, arms
 
 
-def features_errors(result_feats, content_feats, style_feats, gt_feats=None, *, window: int) -> dict:
+def features_errors(result_feats, content_feats, style_feats, gt_feats=None, *, window: int,
+                    gt_reference_feats=None) -> dict:
     """The errors of :func:`clip_errors` from precomputed :func:`clip_features` tuples (hands, arm vel).
 
+    ``style_feats`` are the style *reference* features (``reference=True``); ``gt_feats`` the ground truth's
+    plain features (for gt_content) and ``gt_reference_feats`` its reference features (for gt_style;
+    default ``gt_feats``).
     References: Kuriyama et al. 2022, eqs. 13-16.
     """
     out = {
@@ -83,27 +221,35 @@ def features_errors(result_feats, content_feats, style_feats, gt_feats=None, *, 
         "style": metrics.style_error(result_feats[1], style_feats[1], window),
     }
     if gt_feats is not None:
+        ref = gt_feats if gt_reference_feats is None else gt_reference_feats
         out["gt_content"] = metrics.content_error(gt_feats[0], result_feats[0])
-        out["gt_style"] = metrics.style_error(result_feats[1], gt_feats[1], window)
+        out["gt_style"] = metrics.style_error(result_feats[1], ref[1], window)
     return out
 
 
-def clip_errors(result: Motion, content: Motion, style: Motion, ground_truth: Motion | None = None) -> dict:
-    """Errors of one transferred clip: ``{"content", "style"[, "gt_content", "gt_style"]}``.
+def clip_errors(result: Motion, content: Motion, style: Motion, ground_truth: Motion | None = None, *,
+                protocol="authors") -> dict:
+    """Errors of one transferred clip: ``{"content", "style"[, "gt_content", "gt_style"]}`` under ``protocol``.
 
     Each value is ``{"mean", "worst", "w25"}``. content: E^content between the content clip's and the
     result's hands (DTW-aligned, metres); style: E^style of the result's arm-joint velocities against the
-    style clip's windows (theta = window_for_fps(result.fps)); gt_content / gt_style: the same two errors
-    with the ground-truth clip (content performed in the target style) in place of the content and of the
-    style clip, only when ``ground_truth`` is given. All clips are compared at the result's frame rate.
-    Raises DataError when a clip is shorter than one style window.
+    style reference's windows (the style clip + its mirror under the authors' protocol; theta =
+    window_for_fps(result.fps)); gt_content / gt_style: the same two errors with the ground-truth clip
+    (content performed in the target style) in place of the content and of the style clip, only when
+    ``ground_truth`` is given. All clips are compared at the result's frame rate. Raises DataError when a
+    clip is too short for the protocol's cut or one style window.
 
     References: Kuriyama et al. 2022, eqs. 13-16 and §4.3 (imitated ground truth); SPEC §5.
     """
+    p = get_protocol(protocol)
     fps = result.fps
-    feats = [clip_features(m, fps) for m in (result, content, style)]
-    gt = clip_features(ground_truth, fps) if ground_truth is not None else None
-    return features_errors(*feats, gt, window=metrics.window_for_fps(fps))
+    gt = gt_ref = None
+    if ground_truth is not None:
+        gt = clip_features(ground_truth, fps, p)
+        gt_ref = clip_features(ground_truth, fps, p, reference=True)
+    return features_errors(clip_features(result, fps, p), clip_features(content, fps, p),
+                           clip_features(style, fps, p, reference=True), gt,
+                           window=metrics.window_for_fps(fps), gt_reference_feats=gt_ref)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -124,6 +270,18 @@ def _is_neutral(clip, neutral) -> bool:
     return clip.style.lower() in {n.lower() for n in neutral}
 
 
+def _subset(items: list, max_pairs: int | None, seed: int) -> list:
+    """A seeded random subset of ``max_pairs`` items in their order (None or 0 = all)."""
+    if max_pairs is None or max_pairs == 0:
+        return items
+    if max_pairs < 0:
+        raise DataError(f"evaluate: --max-pairs must be >= 0 (0 = all pairs), got {max_pairs}")
+    if len(items) <= max_pairs:
+        return items
+    keep = np.sort(np.random.default_rng(seed).choice(len(items), size=max_pairs, replace=False))
+    return [items[i] for i in keep]
+
+
 def make_pairs(
     clips: Sequence,
     mode: str = "intra",
@@ -140,7 +298,8 @@ def make_pairs(
     than the style clip when the dataset has one, else the style clip itself (intra pairs of datasets with
     one take per content and style, e.g. Bandai-Namco), None when the dataset has no such clip (ZEGGS).
     Pairs are ordered by (content path, style path); ``max_pairs`` keeps a random subset (seeded by
-    ``seed``) in that order. References: Kuriyama et al. 2022, §4.3 (intra- and inter-scenario conditions).
+    ``seed``) in that order (None or 0: all pairs). References: Kuriyama et al. 2022, §4.3 (intra- and
+    inter-scenario conditions).
     """
     if mode not in PAIR_MODES:
         raise DataError(f"evaluate: unknown pair mode {mode!r} (choose from {', '.join(PAIR_MODES)})")
@@ -159,13 +318,139 @@ def make_pairs(
             others = [g for g in candidates if g is not s]
             gt = others[0] if others else (candidates[0] if candidates else None)
             pairs.append(Pair(c, s, gt))
-    if max_pairs is not None:
-        if max_pairs < 1:
-            raise DataError(f"evaluate: --max-pairs must be >= 1, got {max_pairs}")
-        if len(pairs) > max_pairs:
-            keep = np.sort(np.random.default_rng(seed).choice(len(pairs), size=max_pairs, replace=False))
-            pairs = [pairs[i] for i in keep]
-    return pairs
+    return _subset(pairs, max_pairs, seed)
+
+
+# --------------------------------------------------------------------------------------------------------
+# Batched, bucketed transfers
+
+
+def bucket_length(frames: int, ratio: float = DEFAULT_BUCKET, *, multiple: int = 16, base: int = 64) -> int:
+    """Padded length of a ``frames``-frame clip: the smallest of base, base * ratio, base * ratio^2, ...
+    (each rounded up to a multiple of ``multiple``) that holds it. ``ratio <= 1``: no bucketing (the
+    clip's own length). Few distinct lengths -> few compilations; at most ``ratio``x the frames.
+    """
+    if ratio <= 1.0:
+        return int(frames)
+    k = base
+    while k < frames:
+        k = max(k + multiple, int(math.ceil(k * ratio / multiple)) * multiple)
+    return k
+
+
+def _num_tokens(frames: int, cfg) -> int:
+    """Tokens whose frames all lie in the first ``frames`` frames (token m covers latent frames
+    m*h .. m*h + w - 1)."""
+    red, w, h = cfg.autoencoder.time_reduction, cfg.token_width, cfg.token_stride
+    latent = frames // red
+    return 0 if latent < w else (latent - w) // h + 1
+
+
+def _swap_weights(params, content_upper, style_upper, *, cfg):
+    """Soft-swap weights ``(batch, Nc, Ns)`` of a transfer, row n = content token n from the content's first
+    frame, column m = style token m from the style's first frame (the one call site of the model's API)."""
+    fn = getattr(tgst_model, "swap_weights", None)
+    if fn is not None:
+        return fn(params, content_upper, style_upper, cfg=cfg)
+    return tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method="soft")[2]["swap_weights"]
+
+
+@functools.lru_cache(maxsize=16)
+def _pair_function(cfg, methods: tuple, weights: bool):
+    """One jitted function per (config, methods): every method's transfer of one (padded) pair, plus the
+    soft-swap weights; jax.jit compiles it once per (content, style) bucket shape."""
+    import jax
+
+    def run(params, content_upper, style_upper):
+        outs = {}
+        for m in methods:
+            up, lo, _ = tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method=m)
+            outs[m] = (up, lo)
+        w = _swap_weights(params, content_upper, style_upper, cfg=cfg) if weights else None
+        return outs, w
+
+    return jax.jit(run)
+
+
+class BatchedTransfer:
+    """Transfers of many pairs with a trained :class:`jaxgest.tgst.api.TGSTModel` and few compilations.
+
+    Each clip is converted to body exp-maps at the model rate once; content and style are padded at the end
+    by replicating their last frame to :func:`bucket_length` (``ratio``; <= 1 = exact, no padding), every
+    method runs in one jitted call per pair, and the outputs are cut back to the content's frames and
+    written on its skeleton (:meth:`TGSTModel.to_motion`). Pairs that share a bucket shape share one
+    compilation. The padding frames reach the real ones only through the transformer's attention (band and
+    CLS) and the swap (extra style tokens of a held pose) -- see the measured difference in README.md.
+    """
+
+    def __init__(self, model, methods: Sequence[str], *, ratio: float = DEFAULT_BUCKET, diagnostics: bool = True):
+        self.model, self.methods, self.ratio = model, tuple(methods), float(ratio)
+        self.diagnostics = diagnostics and any(m in ("soft", "hard") for m in self.methods)
+        self._arrays: dict = {}
+        self.shapes: set = set()
+
+    def body(self, clip, role: str) -> np.ndarray:
+        key = id(clip)
+        if key not in self._arrays:
+            self._arrays[key] = (clip, self.model.body_arrays(clip.motion, role))
+        return self._arrays[key][1]
+
+    def run(self, pair: Pair) -> tuple[dict, dict | None]:
+        """``({method: Motion}, swap diagnostics or None)`` of one pair; DataError for unusable clips."""
+        cu, su = self.body(pair.content, "content"), self.body(pair.style, "style")
+        fc, fs = len(cu), len(su)
+        bc, bs = bucket_length(fc, self.ratio), bucket_length(fs, self.ratio)
+        self.shapes.add((bc, bs))
+        c = np.pad(cu, ((0, bc - fc), (0, 0)), mode="edge")[None]
+        s = np.pad(su, ((0, bs - fs), (0, 0)), mode="edge")[None]
+        fn = _pair_function(self.model.cfg, self.methods, self.diagnostics)
+        outs, w = fn(self.model.params, c, s)
+        results = {}
+        for m, (up, lo) in outs.items():
+            results[m] = self.model.to_motion(np.asarray(up[0, :fc]), np.asarray(lo[0, :fc]),
+                                              pair.content.motion)
+        diag = None
+        if w is not None:
+            nc, ns = _num_tokens(fc, self.model.cfg), _num_tokens(fs, self.model.cfg)
+            diag = swap_diagnostics(np.asarray(w[0]), nc, ns) if nc and ns else None
+        return results, diag
+
+
+def swap_diagnostics(weights: np.ndarray, num_queries: int | None = None, num_style: int | None = None) -> dict:
+    """How a soft swap blends: statistics of swap weights ``(Nc, Ns)`` (rows on the simplex).
+
+    Rows are content tokens from the content's first frame, columns style tokens from the style's first
+    frame (same model rate, so equal indices are equal times). Only the first ``num_queries`` rows (tokens of
+    the real content) are used; columns past ``num_style`` (padding of the style) stay in the rows as the
+    swap saw them and their total weight is reported as ``padding_mass``. Returns::
+
+        {"max_weight": mean over rows of max_m w_nm,
+         "effective_tokens": mean over rows of 1 / sum_m w_nm^2 (1 = one token, Ns = uniform),
+         "argmax_within_1": fraction of rows whose argmax m has |m - n| <= 1,
+         "chance_within_1": that fraction for an argmax uniform over the Ns real style tokens,
+         "padding_mass", "num_queries", "num_style"}
+
+    References: Kuriyama et al. 2022, eq. 4 (the soft swap weights W).
+    """
+    w = np.asarray(weights, np.float64)
+    if w.ndim != 2 or w.size == 0:
+        raise DataError(f"swap_diagnostics: expected weights (Nc, Ns), got shape {w.shape}")
+    nq = w.shape[0] if num_queries is None else min(int(num_queries), w.shape[0])
+    ns = w.shape[1] if num_style is None else min(int(num_style), w.shape[1])
+    w = w[:nq]
+    n = np.arange(nq)
+    am = w.argmax(axis=1)
+    lo, hi = np.maximum(n - 1, 0), np.minimum(n + 1, ns - 1)
+    chance = np.maximum(hi - lo + 1, 0) / ns
+    return {
+        "max_weight": float(w.max(axis=1).mean()),
+        "effective_tokens": float((1.0 / np.sum(w**2, axis=1)).mean()),
+        "argmax_within_1": float(np.mean(np.abs(am - n) <= 1)),
+        "chance_within_1": float(chance.mean()),
+        "padding_mass": float(w[:, ns:].sum(axis=1).mean()),
+        "num_queries": int(nq),
+        "num_style": int(ns),
+    }
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -180,24 +465,37 @@ def _average(results: list) -> dict | None:
 
 
 class _FeatureCache:
-    """clip_features of dataset clips, computed once per (clip, fps)."""
+    """clip_features of dataset clips, computed once per (clip, fps, protocol, reference)."""
 
-    def __init__(self):
+    def __init__(self, protocol: Protocol):
+        self.protocol = protocol
         self._cache = {}
 
-    def __call__(self, clip, fps):
-        key = (id(clip), round(float(fps), 6))
+    def __call__(self, clip, fps, reference: bool = False):
+        key = (id(clip), round(float(fps), 6), reference)
         if key not in self._cache:
-            self._cache[key] = (clip, clip_features(clip.motion, fps))
-        return self._cache[key][1]
+            motion = clip.motion if clip.motion.name else clip.motion.replace(name=str(clip.path))
+            try:
+                value = clip_features(motion, fps, self.protocol, reference=reference)
+            except DataError as e:
+                value = e
+            self._cache[key] = (clip, value)
+        value = self._cache[key][1]
+        if isinstance(value, DataError):
+            raise value
+        return value
 
 
 def _too_short(pair: Pair, cache: _FeatureCache, fps: float, window: int) -> str:
-    """Why the pair cannot be evaluated (content or style clip shorter than one style window), or ''."""
-    for role, clip in (("content", pair.content), ("style", pair.style)):
-        frames = len(cache(clip, fps)[1])
+    """Why the pair cannot be evaluated (content or style clip too short for the cut or one style window)."""
+    for role, clip, ref in (("content", pair.content, False), ("style", pair.style, True)):
+        try:
+            frames = len(cache(clip, fps, ref)[1])
+        except DataError as e:
+            return f"{clip.path}: {role} clip: {e}"
         if frames < window:
-            return f"{clip.path}: {role} clip of {frames} frames is shorter than one style window of {window}"
+            return (f"{clip.path}: {role} clip of {frames} velocity frames ({cache.protocol.label} protocol) is "
+                    f"shorter than one style window of {window}")
     return ""
 
 
@@ -230,10 +528,7 @@ def _load_pairs(data_dir, pairs, max_pairs, contents, seed, progress):
     clips = load_folder(data_dir, progress=progress)
     # Only the content clips are filtered; style (and ground-truth) clips come from the whole dataset.
     chosen = {id(c) for c in _select(clips, contents, data_dir)}
-    found = [p for p in make_pairs(clips, pairs, seed=seed) if id(p.content) in chosen]
-    if max_pairs is not None and len(found) > max_pairs:
-        keep = np.sort(np.random.default_rng(seed).choice(len(found), size=max_pairs, replace=False))
-        found = [found[i] for i in keep]
+    found = _subset([p for p in make_pairs(clips, pairs, seed=seed) if id(p.content) in chosen], max_pairs, seed)
     if not found:
         raise DataError(
             f"{data_dir}: no {pairs} content/style pairs (content clips need a style named "
@@ -242,36 +537,73 @@ def _load_pairs(data_dir, pairs, max_pairs, contents, seed, progress):
     return found
 
 
+def _gt_features(pair, cache, fps, window):
+    """(plain, reference) features of the pair's ground truth, or (None, None) when it has none or it is
+    too short for the protocol / one window."""
+    if pair.ground_truth is None:
+        return None, None
+    try:
+        gt, gt_ref = cache(pair.ground_truth, fps), cache(pair.ground_truth, fps, True)
+    except DataError:
+        return None, None
+    if len(gt_ref[1]) < window:
+        return None, None
+    return gt, gt_ref
+
+
+def _summarize(collected: dict, skipped: int) -> dict:
+    out = {k: _average(collected[k]) for k in ERROR_KEYS}
+    out["num_gt"] = len(collected["gt_content"])
+    out["num_evaluated"] = len(collected["content"])
+    out["num_skipped"] = skipped
+    return out
+
+
 def evaluate(
     workdir,
     data_dir,
     *,
     pairs: str = "intra",
-    methods: Sequence[str] = METHODS,
+    methods: Sequence[str] | None = None,
     max_pairs: int | None = None,
     contents: Sequence[str] | None = None,
     seed: int = 0,
     model=None,
     progress: bool = True,
+    protocol="authors",
+    trim_seconds: float | None = None,
+    bucket: float = DEFAULT_BUCKET,
 ) -> dict:
-    """Evaluate style transfer over a dataset's pairs: the paper's Tables 2/3 plus ground-truth errors.
+    """Evaluate style transfer over a dataset's pairs: the paper's Tables 2/3, controls, ground-truth errors.
 
-    Loads the model of ``workdir`` (``jaxgest.tgst.api.load_model``; or uses ``model``, any object with
-    ``.transfer(content, style, method=...) -> Motion``), builds :func:`make_pairs` of ``data_dir``
-    (``contents`` restricts the content clips), transfers every pair with every method and returns::
+    Loads the model of ``workdir`` (``jaxgest.tgst.api.load_model``; or uses ``model``: a TGSTModel, or any
+    object with ``.transfer(content, style, method=...) -> Motion``, transferred pair by pair), builds
+    :func:`make_pairs` of ``data_dir`` (``contents`` restricts the content clips; ``max_pairs`` None or 0 =
+    all pairs), transfers every pair with every method (default the paper's four) and returns::
 
-        {"workdir", "data", "pairs", "num_pairs", "methods": {m: {"content", "style", "gt_content",
-         "gt_style", "num_gt", "num_skipped"}}, "per_pair": [{"content", "style", "style_label",
-         "ground_truth", "errors": {m: {...}} | "skipped": reason}]}
+        {"workdir", "data", "pairs", "num_pairs", "protocol": {...}, "bucket",
+         "methods": {m: {"content", "style", "gt_content", "gt_style", "num_gt", "num_evaluated",
+                         "num_skipped", "protocol"}},
+         "controls": {"content_as_is" | "style_as_is": {same keys}},
+         "swap_diagnostics": {...} | None, "timing": {"wall_s", "cpu_s", "compiled_shapes"},
+         "per_pair": [{"content", "style", "style_label", "ground_truth", "errors": {m: {...}} |
+                       {"skipped": reason}, "controls": {...}, "swap": {...}}], "notes"}
 
-    where each error is the average over pairs of ``{"mean","worst","w25"}`` (None without pairs).
-    Pairs whose content or style clip is shorter than one style window are skipped (not transferred) and
-    counted, as are transfers the model rejects with a DataError; a ground truth shorter than one window
-    gives no ground-truth errors for that pair.
+    where each error is the average over pairs of ``{"mean","worst","w25"}`` (None without pairs), under
+    ``protocol`` ("authors" or "world", :data:`PROTOCOLS`; ``trim_seconds`` overrides its cut). Pairs whose
+    content or style clip is too short for the cut or one style window are skipped (not transferred) and
+    counted, as are transfers the model rejects with a DataError; a ground truth that is too short gives no
+    ground-truth errors for that pair. ``bucket``: length-bucket ratio of :class:`BatchedTransfer` (<= 1:
+    exact per-pair shapes). The controls take the content clip and the style clip themselves as the
+    result. Swap diagnostics (:func:`swap_diagnostics`) of the soft swap are averaged over pairs when
+    "soft" or "hard" is evaluated with a TGSTModel.
     References: Kuriyama et al. 2022, §4.3, Tables 2 and 3.
     """
     from tqdm import tqdm
 
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    proto = get_protocol(protocol, trim_seconds)
+    methods = TRANSFER_METHODS if methods is None else tuple(methods)
     if not methods:
         raise DataError("evaluate: no methods given")
     unknown = [m for m in methods if m not in METHODS]
@@ -282,33 +614,57 @@ def evaluate(
 
         model = load_model(workdir)
     found = _load_pairs(data_dir, pairs, max_pairs, contents, seed, progress)
-    cache = _FeatureCache()
-    collected = {m: {k: [] for k in ERROR_KEYS} for m in methods}
-    skipped = {m: 0 for m in methods}
-    per_pair = []
-    for pair in tqdm(found, desc=f"evaluate ({pairs})", unit="pair", disable=not progress):
+    batched = None
+    if hasattr(model, "body_arrays") and hasattr(model, "to_motion") and hasattr(model, "params"):
+        batched = BatchedTransfer(model, methods, ratio=bucket)
+    cache = _FeatureCache(proto)
+    collected = {m: {k: [] for k in ERROR_KEYS} for m in (*methods, *CONTROLS)}
+    skipped = {m: 0 for m in (*methods, *CONTROLS)}
+    diags, per_pair = [], []
+    for pair in tqdm(found, desc=f"evaluate ({pairs}, {proto.label})", unit="pair", disable=not progress):
         record = _pair_record(pair)
-        record["errors"] = {}
+        record["errors"], record["controls"] = {}, {}
+        per_pair.append(record)
         fps = pair.content.motion.fps  # the result is on the content's rig, frame count and rate
         window = metrics.window_for_fps(fps)
         short = _too_short(pair, cache, fps, window)
-        for method in methods:
-            if short:
-                skipped[method] += 1
-                record["errors"][method] = {"skipped": short}
-                continue
+        if short:
+            for m in (*methods, *CONTROLS):
+                skipped[m] += 1
+                (record["controls"] if m in CONTROLS else record["errors"])[m] = {"skipped": short}
+            continue
+        c_feats, s_ref = cache(pair.content, fps), cache(pair.style, fps, True)
+        gt, gt_ref = _gt_features(pair, cache, fps, window)
+        # controls: the content clip and the style clip (its plain features) taken as the result
+        for name, feats in (("content_as_is", c_feats), ("style_as_is", None)):
             try:
-                result = model.transfer(pair.content.motion, pair.style.motion, method=method)
-                gt = None if pair.ground_truth is None else cache(pair.ground_truth, result.fps)
-                if gt is not None and len(gt[1]) < window:
-                    gt = None  # ground truth shorter than one window: no ground-truth errors for this pair
-                errs = features_errors(
-                    clip_features(result, result.fps),
-                    cache(pair.content, result.fps),
-                    cache(pair.style, result.fps),
-                    gt,
-                    window=metrics.window_for_fps(result.fps),
-                )
+                feats = feats if feats is not None else cache(pair.style, fps)
+                errs = features_errors(feats, c_feats, s_ref, gt, window=window, gt_reference_feats=gt_ref)
+            except DataError as e:
+                skipped[name] += 1
+                record["controls"][name] = {"skipped": str(e)}
+                continue
+            record["controls"][name] = errs
+            for k, v in errs.items():
+                collected[name][k].append(v)
+        results, failure = {}, None
+        try:
+            if batched is not None:
+                results, diag = batched.run(pair)
+                if diag is not None:
+                    record["swap"] = diag
+                    diags.append(diag)
+        except DataError as e:
+            failure = str(e)
+        for method in methods:
+            try:
+                if failure is not None:
+                    raise DataError(failure)
+                result = results.get(method)
+                if result is None:
+                    result = model.transfer(pair.content.motion, pair.style.motion, method=method)
+                errs = features_errors(clip_features(result, fps, proto), c_feats, s_ref, gt, window=window,
+                                       gt_reference_feats=gt_ref)
             except DataError as e:
                 skipped[method] += 1
                 record["errors"][method] = {"skipped": str(e)}
@@ -316,21 +672,28 @@ def evaluate(
             record["errors"][method] = errs
             for k, v in errs.items():
                 collected[method][k].append(v)
-        per_pair.append(record)
-    summary = {}
-    for m in methods:
-        summary[m] = {k: _average(collected[m][k]) for k in ERROR_KEYS}
-        summary[m]["num_gt"] = len(collected[m]["gt_content"])
-        summary[m]["num_evaluated"] = len(collected[m]["content"])
-        summary[m]["num_skipped"] = skipped[m]
+    label = proto.label
+    summary = {m: dict(_summarize(collected[m], skipped[m]), protocol=label) for m in methods}
+    controls = {m: dict(_summarize(collected[m], skipped[m]), protocol=label) for m in CONTROLS}
+    swap = None
+    if diags:
+        swap = {k: float(np.mean([d[k] for d in diags])) for k in diags[0] if k not in ("num_queries", "num_style")}
+        swap["num_pairs"] = len(diags)
+        swap["method"] = "soft swap weights (eq. 4)"
     return {
         "workdir": str(workdir),
         "data": str(data_dir),
         "pairs": pairs,
         "num_pairs": len(found),
+        "protocol": proto.describe(),
+        "bucket": None if batched is None else (bucket if bucket > 1 else "exact"),
         "methods": summary,
+        "controls": controls,
+        "swap_diagnostics": swap,
+        "timing": {"wall_s": time.perf_counter() - wall0, "cpu_s": time.process_time() - cpu0,
+                   "compiled_shapes": None if batched is None else len(batched.shapes)},
         "per_pair": per_pair,
-        "notes": NOTES,
+        "notes": _notes(proto),
     }
 
 
@@ -342,49 +705,54 @@ def metric_validity(
     contents: Sequence[str] | None = None,
     seed: int = 0,
     progress: bool = True,
+    protocol="authors",
+    trim_seconds: float | None = None,
 ) -> dict:
     """Table 1: errors of the content clip and of the style clip, each against the referential sample.
 
     For every pair with a ground-truth clip g (the content performed in the style) that is not the style
     clip itself, the content clip c and the style clip s are each taken as if they were a transfer result:
     row "content" = (E^content(g, c), E^style(c | g)), row "style" = (E^content(g, s), E^style(s | g)),
-    averaged over pairs. A valid metric gives a smaller content error in row "content" and a smaller style
+    averaged over pairs, under ``protocol`` (under "authors" g's style reference is g + its mirror, as for
+    any style reference). A valid metric gives a smaller content error in row "content" and a smaller style
     error in row "style". Default ``pairs="inter"``: with one take per content and style (Bandai-Namco,
-    synthetic) the intra-scenario style clip *is* the ground truth. Returns ``{"pairs", "num_pairs",
+    synthetic) the intra-scenario style clip *is* the ground truth. Pairs with a clip too short for the
+    protocol are left out and counted. Returns ``{"pairs", "num_pairs", "num_evaluated", "protocol",
     "rows": {"content": {"content", "style"}, "style": {...}}}``.
     References: Kuriyama et al. 2022, §4.2, Table 1.
     """
     from tqdm import tqdm
 
+    proto = get_protocol(protocol, trim_seconds)
     found = [
         p
         for p in _load_pairs(data_dir, pairs, None, contents, seed, progress)
         if p.ground_truth is not None and p.ground_truth is not p.style
     ]
-    if max_pairs is not None and len(found) > max_pairs:
-        keep = np.sort(np.random.default_rng(seed).choice(len(found), size=max_pairs, replace=False))
-        found = [found[i] for i in keep]
+    found = _subset(found, max_pairs, seed)
     if not found:
         raise DataError(f"{data_dir}: no {pairs} pairs with a ground-truth clip distinct from the style clip")
-    cache = _FeatureCache()
+    cache = _FeatureCache(proto)
     rows = {"content": {"content": [], "style": []}, "style": {"content": [], "style": []}}
-    for pair in tqdm(found, desc="metric validity", unit="pair", disable=not progress):
+    for pair in tqdm(found, desc=f"metric validity ({proto.label})", unit="pair", disable=not progress):
         fps = pair.ground_truth.motion.fps
         window = metrics.window_for_fps(fps)
-        g = cache(pair.ground_truth, fps)
-        for row, clip in (("content", pair.content), ("style", pair.style)):
-            x = cache(clip, fps)
-            try:
-                ce = metrics.content_error(g[0], x[0])
-                se = metrics.style_error(x[1], g[1], window)
-            except DataError:
-                continue
+        try:
+            g, g_ref = cache(pair.ground_truth, fps), cache(pair.ground_truth, fps, True)
+            xs = [cache(clip, fps) for clip in (pair.content, pair.style)]
+            results = [(metrics.content_error(g[0], x[0]), metrics.style_error(x[1], g_ref[1], window))
+                       for x in xs]
+        except DataError:
+            continue
+        for row, (ce, se) in zip(("content", "style"), results):
             rows[row]["content"].append(ce)
             rows[row]["style"].append(se)
     return {
         "data": str(data_dir),
         "pairs": pairs,
         "num_pairs": len(found),
+        "num_evaluated": len(rows["content"]["content"]),
+        "protocol": proto.label,
         "rows": {r: {k: _average(v) for k, v in cols.items()} for r, cols in rows.items()},
     }
 
@@ -397,6 +765,9 @@ _LABELS = {
     "hard": "Hard swap (19)",
     "adain": "AdaIN (17)",
     "avatarnet": "Avatar-net (18)",
+    "autoencoder": "Autoencoder round trip",
+    "content_as_is": "Content as is (control)",
+    "style_as_is": "Style as is (control)",
 }
 
 
@@ -405,40 +776,67 @@ def _fmt(stats: dict | None) -> list[str]:
 
 
 def markdown_table(report: dict) -> str:
-    """The paper's Table 2/3 layout (+ ground-truth columns) as markdown, one row per method."""
+    """The paper's Table 2/3 layout (+ ground-truth columns, + control rows) as markdown, one row per method,
+    with the protocol of every row."""
     head = [
         "Method",
+        "protocol",
+        "n",
         *(f"content {k}" for k in STATS),
         *(f"style {k}" for k in STATS),
         *(f"gt content {k}" for k in STATS),
         *(f"gt style {k}" for k in STATS),
     ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for m, s in report["methods"].items():
-        cells = [_LABELS.get(m, m)] + [c for k in ERROR_KEYS for c in _fmt(s[k])]
+    rows = list(report["methods"].items()) + list((report.get("controls") or {}).items())
+    for m, s in rows:
+        proto = s.get("protocol", report.get("protocol", {}).get("name", "-"))
+        cells = [_LABELS.get(m, m), proto, str(s.get("num_evaluated", "-"))]
+        cells += [c for k in ERROR_KEYS for c in _fmt(s[k])]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
+def diagnostics_table(report: dict) -> str:
+    """Swap diagnostics of a report as one markdown row ('' when the report has none)."""
+    d = report.get("swap_diagnostics")
+    if not d:
+        return ""
+    head = ["soft swap", "pairs", "mean max weight", "effective tokens", "argmax within +-1", "chance",
+            "padding mass"]
+    cells = ["weights (eq. 4)", str(d["num_pairs"]), f"{d['max_weight']:.3g}", f"{d['effective_tokens']:.3g}",
+             f"{d['argmax_within_1']:.3g}", f"{d['chance_within_1']:.3g}", f"{d['padding_mass']:.3g}"]
+    return "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head), "| " + " | ".join(cells) + " |"])
+
+
 def validity_table(table: dict) -> str:
     """The paper's Table 1 layout as markdown: rows content / style sample, content and style errors."""
-    head = ["Samples", *(f"content {k}" for k in STATS), *(f"style {k}" for k in STATS)]
+    head = ["Samples", "protocol", *(f"content {k}" for k in STATS), *(f"style {k}" for k in STATS)]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row, cols in table["rows"].items():
-        cells = [row.capitalize()] + [c for k in ("content", "style") for c in _fmt(cols[k])]
+        cells = [row.capitalize(), table.get("protocol", "-")] + [c for k in ("content", "style") for c in _fmt(cols[k])]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
 __all__ = [
     "METHODS",
+    "PROTOCOLS",
+    "TRANSFER_METHODS",
+    "BatchedTransfer",
     "Pair",
+    "Protocol",
+    "bucket_length",
     "clip_errors",
     "clip_features",
+    "diagnostics_table",
     "evaluate",
     "features_errors",
+    "get_protocol",
     "make_pairs",
     "markdown_table",
     "metric_validity",
+    "style_reference",
+    "swap_diagnostics",
     "validity_table",
 ]

@@ -1,6 +1,7 @@
 """Autoencoder and swap diagnostics on the held-out clips: what the model does before any style is involved.
 
     python experiments/tgst_bandai/diagnose.py WORKDIR EVAL_DIR OUT.json [TRAIN_DIR] [--ae-step N] [--no-swap]
+        [--edge-frames N]
 
 1. Reconstruction against baselines with the same inputs (upper body, 13 joints, model rate, geodesic
    angle per joint, degrees): the autoencoder round trip (jaxgest.tgst.model.reconstruct: the clip-end
@@ -8,9 +9,10 @@
    on TRAIN_DIR's original and mirrored clips) and the mean pose (constant predictor, same data). Per joint
    and overall; also the first frame against the interior (frames 16 .. F-17) for the autoencoder.
 2. Round trips as motions: each held-out clip x is re-encoded and decoded (upper and lower body), written on
-   x's skeleton as `jaxgest tgst transfer --method autoencoder` does, and compared with x: mean arm-joint
-   speed ratio overall and on frames 0-5, per-joint interior speed ratio (8 arm joints, frames 6 .. F-7),
-   style error and content error of the round trip (the evaluation's errors).
+   x's skeleton as `jaxgest tgst transfer --method autoencoder` does (TGSTModel.to_motion), and compared
+   with x: mean arm-joint speed ratio (world positions, forward differences, 8 arm joints) overall and on
+   frames 0-5, per-joint interior speed ratio (frames 6 .. F-7), style and content error of the round trip
+   under the world protocol and the authors' protocol (jaxgest.tgst.evaluate).
 3. Swap diagnostics (needs a trained transformer; skip with --no-swap) on the inter pairs of the held-out
    contents via jaxgest.tgst.model.swap_weights: mean largest soft-swap weight, effective number of blended
    style tokens 1 / sum w^2, fraction of content tokens whose argmax style token lies within +-1 index of
@@ -32,7 +34,6 @@ from jaxgest import metrics
 from jaxgest.motion import body, datasets
 from jaxgest.tgst import baselines
 from jaxgest.tgst import model as tmodel
-from jaxgest.tgst.api import resample_body
 from jaxgest.tgst.autoencoder import angular_error_rad
 from jaxgest.tgst.config import config_from_dict
 from jaxgest.tgst.evaluate import clip_features, features_errors, make_pairs
@@ -75,8 +76,14 @@ def main(argv) -> int:
     ap.add_argument("train_dir", nargs="?")
     ap.add_argument("--ae-step", type=int, default=None)
     ap.add_argument("--no-swap", action="store_true")
+    ap.add_argument("--edge-frames", type=int, default=None,
+                    help="override the config's edge padding (0 = the old end-only padding, for comparison)")
     args = ap.parse_args(argv[1:])
     cfg, params = load_params(args.workdir, args.ae_step, transformer=not args.no_swap)
+    if args.edge_frames is not None:
+        import dataclasses
+
+        cfg = dataclasses.replace(cfg, edge_frames=args.edge_frames)
     rec_jit = jax.jit(lambda p, u: tmodel.reconstruct(p, u[None], cfg=cfg))
 
     def rec(p, u):  # the end replicated up to a multiple of 128 frames: fewer compilations, same real frames
@@ -85,7 +92,8 @@ def main(argv) -> int:
         return tuple(a[:, :f] for a in rec_jit(p, u))
     clips = datasets.load_folder(args.eval_dir, progress=False)
     held = [body_upper_lower(c.motion, cfg.fps) for c in clips]
-    report = {"workdir": args.workdir, "config": cfg.name, "ae_step": args.ae_step, "num_clips": len(clips)}
+    report = {"workdir": args.workdir, "config": cfg.name, "ae_step": args.ae_step, "num_clips": len(clips),
+              "edge_frames": cfg.edge_frames}
 
     # ---- 1. angles: AE vs PCA-16 vs mean pose
     per_joint = {"autoencoder": []}
@@ -99,15 +107,24 @@ def main(argv) -> int:
         first.append(err[0].mean())
         interior.append(err[16:-16].mean() if len(err) > 40 else err.mean())
     if args.train_dir:
-        train = [body_upper_lower(c.motion, cfg.fps) for c in datasets.load_folder(args.train_dir, progress=False)]
-        from jaxgest.motion import kinematics
+        import pathlib
 
-        mirrored = [body_upper_lower(kinematics.mirror(c.motion), cfg.fps) for c in
-                    datasets.load_folder(args.train_dir, progress=False)]
-        train_up = [u for u, _ in train] + [u for u, _ in mirrored]
-        pca = baselines.block_pca_fit(train_up, components=cfg.autoencoder.latent_dim,
-                                      frames=cfg.autoencoder.time_reduction)
-        mean_pose = baselines.mean_pose_fit(train_up)
+        cache = pathlib.Path(args.workdir).resolve().parent / "recon_baselines_cache.npz"  # same TRAIN_DIR
+        if cache.is_file():
+            z = np.load(cache)
+            pca = {"mean": z["pca_mean"], "basis": z["pca_basis"], "frames": int(z["pca_frames"])}
+            mean_pose = z["mean_pose"]
+        else:
+            from jaxgest.motion import kinematics
+
+            train_clips = datasets.load_folder(args.train_dir, progress=False)
+            train_up = [body_upper_lower(c.motion, cfg.fps)[0] for c in train_clips]
+            train_up += [body_upper_lower(kinematics.mirror(c.motion), cfg.fps)[0] for c in train_clips]
+            pca = baselines.block_pca_fit(train_up, components=cfg.autoencoder.latent_dim,
+                                          frames=cfg.autoencoder.time_reduction)
+            mean_pose = baselines.mean_pose_fit(train_up)
+            np.savez(cache, pca_mean=pca["mean"], pca_basis=pca["basis"], pca_frames=pca["frames"],
+                     mean_pose=mean_pose)
         per_joint["pca16"] = [baselines.per_joint_angle_deg(baselines.block_pca_reconstruct(pca, up), up)
                               for up, _ in held]
         per_joint["mean_pose"] = [baselines.per_joint_angle_deg(mean_pose, up) for up, _ in held]
@@ -118,31 +135,43 @@ def main(argv) -> int:
     report["ae_first_frame_deg"] = float(np.mean(first))
     report["ae_interior_deg"] = float(np.mean(interior))
 
-    # ---- 2. round trips as motions at the clip rate
+    # ---- 2. round trips as motions at the clip rate (written like `jaxgest tgst transfer` writes a result)
+    from jaxgest.motion import kinematics
+    from jaxgest.tgst.api import TGSTModel
+    from jaxgest.tgst.evaluate import _joint_indices, get_protocol
+
+    writer = TGSTModel(cfg, params)
     rows = []
-    for clip, (up, lo), (u_hat, l_hat) in zip(clips, held, ae_out):
+    for clip, (u_hat, l_hat) in zip(clips, ae_out):
         x = clip.motion
-        F = x.num_frames
-        y = body.body_to_motion(resample_body(u_hat, cfg.fps, x.fps, F), resample_body(l_hat, cfg.fps, x.fps, F),
-                                x, floor=True)
-        fx, fy = clip_features(x), clip_features(y)
-        sx, sy = speeds(fx[1]), speeds(fy[1])
-        window = metrics.window_for_fps(x.fps)
+        y = writer.to_motion(u_hat, l_hat, x)
+        arms = _joint_indices(x, body.ARMS)
+        sx, sy = (np.linalg.norm(np.diff(kinematics.forward_kinematics(m)[:, arms], axis=0), axis=-1)
+                  * x.fps * 0.01 for m in (x, y))  # (F-1, 8) world arm-joint speeds, m/s, forward differences
         r = {"clip": clip.path.name, "speed_ratio": float(sy.mean() / sx.mean()),
              "speed_ratio_0_5": float(sy[:6].mean() / sx[:6].mean()),
              "joint_interior_ratio": (sy[6:-6].mean(0) / sx[6:-6].mean(0)).tolist(),
-             "first_step_speed": float(sy[1].mean()), "first_step_speed_input": float(sx[1].mean())}
-        if len(fx[1]) >= window:
-            e = features_errors(fy, fx, fx, window=window)
-            r.update(style=e["style"]["mean"], content=e["content"]["mean"])
+             "first_step_speed": float(sy[0].mean()), "first_step_speed_input": float(sx[0].mean())}
+        window = metrics.window_for_fps(x.fps)
+        for proto in ("world", "authors"):
+            try:
+                fx = clip_features(x, protocol=proto)
+                e = features_errors(clip_features(y, protocol=proto), fx, clip_features(x, protocol=proto,
+                                    reference=get_protocol(proto).mirror_style), window=window)
+                r[f"style_{proto}"], r[f"content_{proto}"] = e["style"]["mean"], e["content"]["mean"]
+            except Exception as err:  # too short for the protocol's cut or one window
+                r[f"skipped_{proto}"] = str(err)
         rows.append(r)
     jr = np.array([r["joint_interior_ratio"] for r in rows])
     report["roundtrip"] = {
         "speed_ratio": float(np.mean([r["speed_ratio"] for r in rows])),
         "speed_ratio_0_5": float(np.mean([r["speed_ratio_0_5"] for r in rows])),
+        "first_step_speed": float(np.mean([r["first_step_speed"] for r in rows])),
+        "first_step_speed_input": float(np.mean([r["first_step_speed_input"] for r in rows])),
         "joint_interior_ratio": dict(zip(body.ARMS, jr.mean(0).round(3).tolist())),
-        "style": float(np.mean([r["style"] for r in rows if "style" in r])),
-        "content": float(np.mean([r["content"] for r in rows if "content" in r])),
+        **{f"{k}_{p}": float(np.mean([r[f"{k}_{p}"] for r in rows if f"{k}_{p}" in r]))
+           for k in ("style", "content") for p in ("world", "authors")},
+        **{f"clips_{p}": sum(f"style_{p}" in r for r in rows) for p in ("world", "authors")},
         "clips": rows}
 
     # ---- 3. swap diagnostics on inter pairs

@@ -6,9 +6,16 @@ Presets (``get_config(name)``):
   (one LayerNorm per block shared by both residuals, as in the authors' code; ``layernorms_per_block=2``
   gives 50,496). AE: Adam 1e-4, batch 32, 256-frame windows; transformer: Adam 1e-4, batch 8, 1280-frame
   windows. Default ``variant="paper"``: pre-LN ("layer normalization as a preprocessing step", §3.4),
-  band mask |i - j| <= omega, sinusoidal positions over the token index.
+  band mask |i - j| <= omega, sinusoidal positions over the token index; clips replicate-padded by 16
+  frames at both ends (SPEC §3).
   Command: ``jaxgest tgst train --data DIR --workdir W --preset paper``; the paper trains 1000 epochs
   (hours on a CPU); expect an AE mean angular error of a few degrees on Bandai-Namco.
+* ``"fit"`` -- the paper's sizes (same parameter counts, plus 126 frozen normalisation numbers) with a
+  recipe for real data: the autoencoder standardises its channels with the training data's statistics,
+  trains at Adam 1e-3 with a warm-up and cosine decay (6,000 steps) on content-balanced windows (each
+  content label equally often); the transformer's tokens carry no positions (``token_positions="none"``,
+  as in the authors' code) so the soft swap matches tokens by content, not by index.
+  Command: ``jaxgest tgst train --data DIR --workdir W --preset fit``. See experiments/tgst_bandai.
 * ``"tiny"`` -- the same (already tiny) widths, but short windows and small batches (AE window 64, batch 4;
   transformer window 128, batch 4) and Adam 1e-3 so tests and ``jaxgest demo --quick`` train in seconds
   to a minute on a CPU. Not the paper's training setup.
@@ -219,6 +226,7 @@ def get_config(name: str = "paper") -> TGSTConfig:
         return TGSTConfig(
             name="fit",
             edge_frames=16,
+            transformer=TransformerConfig(token_positions="none"),
             autoencoder=AutoencoderConfig(standardize=True),
             ae_learning_rate=1e-3,
             ae_lr_schedule="cosine",

@@ -93,7 +93,8 @@ def main(argv) -> int:
     print("|---|---|---|---|---|---|---|")
     for r in results.values():
         print(f"| {r['variant']} | {r['seed']} | {r['max_weight']:.3f} | {r['effective_tokens']:.2f} | "
-              f"{r['argmax_within_1']:.3f} | {r['chance_within_1']:.3f} | {r['loss']:.4f} |")
+              f"{r['argmax_within_1']:.3f} | {r['chance_within_1']:.3f} | "
+              f"{'-' if r['loss'] is None else format(r['loss'], '.3f')} |")
     return 0
 
 

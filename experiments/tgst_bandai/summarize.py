@@ -47,7 +47,7 @@ def main(argv) -> int:
     rows = methods + ["content_as_is", "style_as_is"]
     data = {name: [per_pair(r, name) for r in reports] for name in rows}
     n_seeds = len(reports)
-    print(f"**{title}** ({reports[0]['pairs']} pairs, protocol {reports[0].get('protocol', {}).get('label', '?')}, "
+    print(f"**{title}** ({reports[0]['pairs']} pairs, protocol {reports[0].get('protocol', {}).get('name', '?')}, "
           f"{n_seeds} seed(s); pairs evaluated: {len(data['soft'][0]) if 'soft' in data else '?'}). "
           "Each cell: average over pairs, then over seeds" + (" (+- std over seeds)" if n_seeds > 1 else "")
           + "; paper values in brackets.\n")

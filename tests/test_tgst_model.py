@@ -105,7 +105,11 @@ def test_autoencoder_layer_sizes_and_shapes():
 
 
 def test_config_json_round_trip_and_validation():
-    for name in ("paper", "tiny"):
+    from jaxgest.tgst.config import PRESETS
+    from jaxgest.tgst.train import DEFAULT_STEPS
+
+    assert set(PRESETS) == set(DEFAULT_STEPS)
+    for name in PRESETS:
         cfg = get_config(name)
         assert config_from_dict(json.loads(json.dumps(dataclasses.asdict(cfg)))) == cfg
         hash(cfg)  # usable as a jit static argument
@@ -345,21 +349,27 @@ def test_swap_options_run_and_keep_the_simplex(params, similarity, positions):
 
 
 def test_standardized_autoencoder_statistics_are_frozen():
+    from jaxgest.tgst.steps import ae_loss_terms
+
     cfg = dataclasses.replace(CFG, autoencoder=dataclasses.replace(CFG.autoencoder, standardize=True))
     p = init_params(cfg, jax.random.PRNGKey(0))["autoencoder"]
     stats = {"upper_mean": jnp.full((39,), 0.3), "upper_std": jnp.full((39,), 2.0),
              "lower_mean": jnp.full((24,), -0.2), "lower_std": jnp.full((24,), 0.5)}
     p = dict(p, **stats)
+    batch = {"upper": _smooth_motion(17, 2, 32, 39), "lower": _smooth_motion(18, 2, 32, 24)}
+    grads = jax.jit(jax.grad(lambda q: jnp.mean(ae_loss_terms(q, batch, cfg=cfg)["loss"])))(p)
     tx = optax.adam(1e-2)
-    state = create_ae_state(cfg, p, tx)
-    step = jax.jit(make_ae_train_step(cfg, tx))
-    batch = {"upper": _smooth_motion(17, 2, 64, 39), "lower": _smooth_motion(18, 2, 64, 24)}
-    for i in range(3):
-        state, _ = step(state, batch, jax.random.PRNGKey(i))
-    for k, v in stats.items():
-        np.testing.assert_array_equal(np.asarray(state.params[k]), np.asarray(v))
-    assert not np.allclose(np.asarray(state.params["encoder"]["conv_0"]["kernel"]),
-                           np.asarray(p["encoder"]["conv_0"]["kernel"]))
+    updates, _ = tx.update(grads, tx.init(p), p)
+    new = optax.apply_updates(p, updates)
+    for k, v in stats.items():  # no gradient reaches the statistics, so Adam leaves them exactly unchanged
+        np.testing.assert_array_equal(np.asarray(grads[k]), 0.0)
+        np.testing.assert_array_equal(np.asarray(new[k]), np.asarray(v))
+    assert np.abs(np.asarray(grads["encoder"]["conv_0"]["kernel"])).max() > 0
+    # the statistics are used: the output is mean + std * (decoder output)
+    rec = jax.jit(tmodel.reconstruct, static_argnames="cfg")
+    up, _ = rec(p, batch["upper"], cfg=cfg)
+    up0, _ = rec(dict(p, upper_mean=jnp.zeros(39)), batch["upper"], cfg=cfg)
+    assert not np.allclose(np.asarray(up), np.asarray(up0))
 
 
 def test_stored_config_without_new_fields_keeps_old_behaviour():
@@ -384,3 +394,16 @@ def test_content_balanced_window_sampling():
     share = np.mean([i == 9 for i, _ in idx])
     assert 0.45 < share < 0.55  # uniform over windows would give 37 / (9 * 337 + 37) ~ 1 %
     assert all(0 <= s <= lengths[i] - 64 for i, s in idx)
+
+
+def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
+    from jaxgest.errors import JaxgestError
+    from jaxgest.tgst.train import apply_overrides
+
+    cfg = apply_overrides(get_config("fit"), {"swap_similarity": "scaled", "transformer.token_positions": "index",
+                                              "autoencoder.standardize": False})
+    assert cfg.swap_similarity == "scaled" and cfg.transformer.token_positions == "index"
+    assert not cfg.autoencoder.standardize and cfg.edge_frames == 16
+    assert apply_overrides(TINY, None) == TINY
+    with pytest.raises(JaxgestError, match="override"):
+        apply_overrides(TINY, {"swap_similarity": "cosine"})

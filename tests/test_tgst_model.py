@@ -407,3 +407,15 @@ def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
     assert apply_overrides(TINY, None) == TINY
     with pytest.raises(JaxgestError, match="override"):
         apply_overrides(TINY, {"swap_similarity": "cosine"})
+
+
+def test_ae_batch_without_mirrored_clips():
+    up = [np.full((80, 39), float(i), np.float32) for i in range(3)]
+    lo = [np.zeros((80, 24), np.float32) for _ in range(3)]
+    mup = [np.full((80, 39), -1.0 - i, np.float32) for i in range(3)]  # mirrored copies: negative values
+    data = tdata.BodyData(up, lo, mup, lo, ["a", "b", "c"], 60.0, ["x", "x", "y"])
+    for mirror in (True, False):
+        cfg = dataclasses.replace(TINY, ae_mirror=mirror, ae_batch_size=64, ae_sampling="content")
+        b = tdata.ae_batch(data, cfg, 0, 0)["upper"]
+        assert b.shape == (64, cfg.ae_window, 39)
+        assert bool((b < 0).any()) == mirror

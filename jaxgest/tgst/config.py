@@ -126,6 +126,7 @@ class TGSTConfig:
     ae_lr_schedule: str = "constant"  # "constant" (§3.5) or "cosine" (warm-up, cosine decay to 10 %)
     ae_lr_decay_steps: int = 10_000  # length of the cosine schedule (steps); constant lr afterwards
     ae_sampling: str = "windows"  # "windows": uniform over all windows; "content": each content label equally
+    ae_mirror: bool = True  # the autoencoder also sees the mirrored clips (False: the original clips only)
 
     def __post_init__(self):
         t = self.transformer
@@ -183,7 +184,8 @@ def config_from_dict(d: Mapping[str, Any]) -> TGSTConfig:
 
 #: fields added after the first checkpoints were written; a stored config without them was trained with the
 #: class defaults (the old behaviour), see :func:`with_stored_defaults`
-ADDED_FIELDS = ("swap_similarity", "edge_frames", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling")
+ADDED_FIELDS = ("swap_similarity", "edge_frames", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling",
+                "ae_mirror")
 ADDED_TRANSFORMER_FIELDS = ("token_positions",)
 ADDED_AUTOENCODER_FIELDS = ("standardize",)
 

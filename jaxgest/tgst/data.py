@@ -136,19 +136,21 @@ def _rng(seed: int, stage: int, step: int) -> np.random.Generator:
 def ae_batch(data: BodyData, cfg: TGSTConfig, seed: int, step: int) -> dict:
     """``{"upper": (B, W, 39), "lower": (B, W, 24)}`` float32 windows of original and mirrored clips.
 
-    ``cfg.ae_sampling == "windows"``: uniform over all valid (clip, start) pairs of both sets;
+    ``cfg.ae_mirror=False`` leaves the mirrored clips out. ``cfg.ae_sampling == "windows"``: uniform over all
+    valid (clip, start) pairs of both sets;
     ``"content"``: every content label gets the same share of the windows (uniform over the valid windows of
     its clips), so a few long or numerous contents (Bandai-Namco: 105 of 144 training clips are locomotion)
     do not drown the others. B = ``cfg.ae_batch_size``, W = ``cfg.ae_window``.
     """
     rng = _rng(seed, AE_STAGE, step)
-    uppers = data.upper + data.mirrored_upper
-    lowers = data.lower + data.mirrored_lower
+    copies = 2 if cfg.ae_mirror else 1  # ae_mirror=False: the original clips only
+    uppers = (data.upper + data.mirrored_upper)[:copies * len(data.upper)]
+    lowers = (data.lower + data.mirrored_lower)[:copies * len(data.lower)]
     groups = None
     if cfg.ae_sampling == "content":
-        groups = list(data.contents or data.names) * 2
-    w = sample_windows_idx(np.concatenate([data.lengths, data.lengths]), cfg.ae_window, cfg.ae_batch_size, rng,
-                           data.names + data.names, groups=groups)
+        groups = list(data.contents or data.names) * copies
+    w = sample_windows_idx(np.concatenate([data.lengths] * copies), cfg.ae_window, cfg.ae_batch_size, rng,
+                           list(data.names) * copies, groups=groups)
     up = np.stack([uppers[i][s:s + cfg.ae_window] for i, s in w])
     lo = np.stack([lowers[i][s:s + cfg.ae_window] for i, s in w])
     return {"upper": up, "lower": lo}

@@ -419,3 +419,33 @@ def test_ae_batch_without_mirrored_clips():
         b = tdata.ae_batch(data, cfg, 0, 0)["upper"]
         assert b.shape == (64, cfg.ae_window, 39)
         assert bool((b < 0).any()) == mirror
+
+
+def test_checkpoint_of_an_older_version_still_matches(tmp_path):
+    """A checkpoint whose config predates the added fields resumes/loads with a config that has them at their
+    old defaults; another value of such a field is still reported as a mismatch."""
+    import types
+
+    from jaxgest import training
+    from jaxgest.errors import CheckpointError
+    from jaxgest.tgst.config import with_stored_defaults
+    from jaxgest.tgst.train import AE_IGNORED, AE_KIND, AE_SUBDIR, ae_checkpointer
+
+    old = dataclasses.asdict(TINY)
+    for k in ("edge_frames", "swap_similarity", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling", "ae_mirror"):
+        old.pop(k)
+    old["autoencoder"].pop("standardize")
+    old["transformer"].pop("token_positions")
+    ck = training.Checkpointer(tmp_path, kind=AE_KIND, config=old, skeleton=tdata.BODY_SIGNATURE, subdir=AE_SUBDIR,
+                               ignore=AE_IGNORED)
+    ck.save(types.SimpleNamespace(params={"w": jnp.ones(3)}, opt_state={}, step=jnp.asarray(5)))
+    ck.close()
+    cfg = with_stored_defaults(get_config("tiny"), old)  # edge_frames 0 etc.: the old behaviour
+    assert cfg.edge_frames == 0 and cfg.ae_mirror
+    probe = ae_checkpointer(tmp_path, cfg, read_only=True)
+    probe.check_meta(probe.stored_meta())  # no mismatch
+    probe.close()
+    probe = ae_checkpointer(tmp_path, dataclasses.replace(cfg, ae_mirror=False), read_only=True)
+    with pytest.raises(CheckpointError, match="ae_mirror"):
+        probe.check_meta(probe.stored_meta())
+    probe.close()

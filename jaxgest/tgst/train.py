@@ -34,7 +34,8 @@ from jaxgest import parallel, training
 from jaxgest.errors import DataError, JaxgestError
 from jaxgest.motion.synthetic.dataset import training_folder
 from jaxgest.tgst import data as tdata
-from jaxgest.tgst.config import TGSTConfig, get_config, with_stored_defaults
+from jaxgest.tgst.config import (ADDED_AUTOENCODER_FIELDS, ADDED_FIELDS, ADDED_TRANSFORMER_FIELDS, AutoencoderConfig,
+                                 TGSTConfig, TransformerConfig, get_config, with_stored_defaults)
 from jaxgest.tgst.model import init_params
 from jaxgest.tgst.steps import (create_ae_state, create_transformer_state, make_ae_train_step,
                                 make_transformer_train_step)
@@ -89,18 +90,39 @@ def apply_overrides(cfg: TGSTConfig, overrides: Optional[dict] = None) -> TGSTCo
         raise JaxgestError(f"bad TGST config override: {e}") from None
 
 
+def _legacy_compatible(ckpt: training.Checkpointer) -> training.Checkpointer:
+    """Let a checkpoint written before some config fields existed match a config that has them at their class
+    defaults (the old behaviour, see :func:`jaxgest.tgst.config.with_stored_defaults`): such fields are left
+    out of the requested config when the stored one lacks them. Any other value still is a mismatch."""
+    if not ckpt.directory.is_dir() or ckpt.latest_step() is None:
+        return ckpt
+    stored = (ckpt.stored_meta() or {}).get("config") or {}
+    req = ckpt.meta["config"]
+    for name in ADDED_FIELDS:
+        if name not in stored and name in req and req[name] == getattr(TGSTConfig, name):
+            del req[name]
+    for sub, cls, added in (("autoencoder", AutoencoderConfig, ADDED_AUTOENCODER_FIELDS),
+                            ("transformer", TransformerConfig, ADDED_TRANSFORMER_FIELDS)):
+        if isinstance(req.get(sub), dict) and isinstance(stored.get(sub), dict):
+            for name in added:
+                if name not in stored[sub] and req[sub].get(name, object()) == getattr(cls, name):
+                    del req[sub][name]
+    return ckpt
+
+
 def ae_checkpointer(workdir, cfg: TGSTConfig, read_only: bool = False) -> training.Checkpointer:
-    return training.Checkpointer(workdir, kind=AE_KIND, config=dataclasses.asdict(cfg),
-                                 skeleton=tdata.BODY_SIGNATURE, subdir=AE_SUBDIR, read_only=read_only,
-                                 ignore=AE_IGNORED)
+    return _legacy_compatible(training.Checkpointer(
+        workdir, kind=AE_KIND, config=dataclasses.asdict(cfg), skeleton=tdata.BODY_SIGNATURE, subdir=AE_SUBDIR,
+        read_only=read_only, ignore=AE_IGNORED))
 
 
 def transformer_checkpointer(workdir, cfg: TGSTConfig, ae_step: Optional[int],
                              read_only: bool = False) -> training.Checkpointer:
     config = dict(dataclasses.asdict(cfg), autoencoder_step=ae_step)
     ignore = ("steps",) if ae_step is not None else ("steps", "autoencoder_step")
-    return training.Checkpointer(workdir, kind=TRANSFORMER_KIND, config=config, skeleton=tdata.BODY_SIGNATURE,
-                                 subdir=TRANSFORMER_SUBDIR, read_only=read_only, ignore=ignore)
+    return _legacy_compatible(training.Checkpointer(
+        workdir, kind=TRANSFORMER_KIND, config=config, skeleton=tdata.BODY_SIGNATURE, subdir=TRANSFORMER_SUBDIR,
+        read_only=read_only, ignore=ignore))
 
 
 @functools.lru_cache(maxsize=None)

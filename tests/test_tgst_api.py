@@ -117,6 +117,17 @@ def test_transfer_other_rate_and_rig(trained, model, bandai_dir, zeggs_dir):
         out = model.transfer(content, style, method="soft")
         assert out.num_frames == content.num_frames and out.fps == content.fps
         assert out.skeleton.names == content.skeleton.names
+        # the output's lowest foot joint stays where the content's is (not at height 0) on contact frames
+        from jaxgest.tgst.api import foot_names
+
+        feet = [content.skeleton.index(n) for n in foot_names(content.skeleton)]
+        up = content.skeleton.up_axis
+        c_low = kinematics.forward_kinematics(content)[:, feet, up].min(axis=1)
+        o_low = kinematics.forward_kinematics(out)[:, feet, up].min(axis=1)
+        contact = c_low < c_low.min() + 1.0
+        assert np.abs(o_low - c_low)[contact].max() < 1.0
+        if path.name.startswith("dataset-1"):
+            assert c_low[contact].mean() > 3.0  # Bandai-Namco's foot joints stand ~4 cm above the floor
 
 
 def test_too_short_and_nan_clips_rejected(trained, model):
@@ -240,7 +251,7 @@ def test_output_keeps_the_contents_floor_contact_height(trained, model):
 @pytest.mark.slow
 def test_batched_transfer_equals_model_transfer_and_reports_swap_weights(trained, model):
     """jaxgest.tgst.evaluate's in-process transfers: exact shapes give model.transfer's result; buckets pad
-    the clips (edge frames) and cut the result back to the content's frames."""
+    the clips (their own first frames again) and cut the result back to the content's frames."""
     from jaxgest.motion.datasets import Clip
     from jaxgest.tgst import evaluate as ev
 

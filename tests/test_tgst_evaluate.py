@@ -252,6 +252,13 @@ def test_cli_writes_json_and_prints_table(data_dir, tmp_path, monkeypatch, capsy
     assert report["metric_validity"]["pairs"] == "inter" and "| Content |" in printed
     assert set(report["notes"]) >= {"content", "style", "w25"}
     assert not list(tmp_path.glob(".eval.*"))  # no temporary file left behind
+    # --protocol world and --trim are named in the report and the table
+    argv = f"evaluate --workdir {tmp_path} --data {data_dir} --json {out} --pairs inter --methods soft"
+    args = parser.parse_args(argv.split() + ["--max-pairs", "2", "--protocol", "world", "--trim", "0.5"])
+    assert args.func(args) == 0
+    report = json.loads(out.read_text())
+    assert report["protocol"]["name"] == "world(trim 0.5 s)" and report["protocol"]["root_local"] is False
+    assert "| Soft swap (ours) | world(trim 0.5 s) | 2 |" in capsys.readouterr().out
     bad = parser.parse_args(
         f"evaluate --workdir w --data {data_dir} --json {tmp_path}/missing/x.json".split()
     )

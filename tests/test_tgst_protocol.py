@@ -203,3 +203,19 @@ def test_bucket_length_holds_the_clip_with_bounded_padding(frames, ratio):
 
 def test_few_buckets_over_a_range_of_lengths():
     assert len({ev.bucket_length(f, 1.25) for f in range(40, 4000)}) <= 20
+
+
+def test_first_frame_spike_of_a_transfer_is_cut_by_the_authors_protocol(clip):
+    """Motion level: a wild first frame (the clip-start artefact) changes no error under the authors'
+    protocol (inside the 1 s cut) while the world protocol counts it (twice, as v[0] = v[1])."""
+    style = render_clip("directions", "sad", fps=60.0)[0]
+    rot = clip.rotations.copy()
+    arm = clip.skeleton.index("UpperArm_R")
+    rot[0, arm] = [0.0, 1.0, 0.0, 0.0]  # 180 degrees about x on the first frame only
+    spiked = clip.replace(rotations=rot)
+    a = ev.clip_errors(clip, clip, style, protocol="authors")
+    b = ev.clip_errors(spiked, clip, style, protocol="authors")
+    assert a == b
+    a = ev.clip_errors(clip, clip, style, protocol="world")
+    b = ev.clip_errors(spiked, clip, style, protocol="world")
+    assert b["style"]["worst"] > a["style"]["worst"] and b["content"]["worst"] > a["content"]["worst"]

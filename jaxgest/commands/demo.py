@@ -152,7 +152,8 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     timings["zeggs_train_s"] = time.perf_counter() - t
 
     # ---- (a) style transfer of a neutral clip to two styles, all four methods
-    t = step(f"3/6 style transfer: '{CONTENT}' ({NEUTRAL}) -> {', '.join(STYLES)}, methods {', '.join(tev.TRANSFER_METHODS)}")
+    t = step(f"3/6 style transfer: '{CONTENT}' ({NEUTRAL}) -> {', '.join(STYLES)}, "
+             f"methods {', '.join(tev.TRANSFER_METHODS)}")
     tgst = load_tgst(out / "tgst")
     content, _ = _clip(data, CONTENT, NEUTRAL)
     transfer = {}

@@ -75,7 +75,8 @@ def summarize_errors(components) -> dict:
 def content_error_components(content_hands, transfer_hands) -> np.ndarray:
     """E_i^content = ||p^c_{c_i} - p^x_{x_i}||_2 over the DTW-aligned pairs I = DTW(p^c, p^x); ``(K,)``.
 
-    content_hands: (Fc, 6), transfer_hands: (Fx, 6) -- both hands' world positions in metres.
+    content_hands: (Fc, 6), transfer_hands: (Fx, 6) -- both hands' positions in metres (world or root-local,
+    one protocol for both).
     References: Kuriyama et al. 2022, eqs. 13-14 (exact DTW in place of FastDTW, SPEC §5).
     """
     pc = _as_frames(content_hands, "content_error: content_hands", 6)
@@ -87,8 +88,8 @@ def content_error_components(content_hands, transfer_hands) -> np.ndarray:
 def content_error(content_hands, transfer_hands, *, trim: int = 0) -> dict:
     """Content error of a transfer: ``{"mean", "worst", "w25"}`` of eq. 13 over the DTW path of eq. 14.
 
-    content_hands: (Fc, 6) and transfer_hands: (Fx, 6) are both hands' world positions IN METRES
-    ([left xyz, right xyz]; callers convert, e.g. :func:`hands_metres` for centimetre BVH files). The clips are
+    content_hands: (Fc, 6) and transfer_hands: (Fx, 6) are both hands' positions IN METRES (world or
+    root-local; [left xyz, right xyz]; callers convert, e.g. :func:`hands_metres` for centimetre BVH files). The clips are
     aligned by exact DTW (Euclidean frame distance, steps (1,1), (1,0), (0,1)); every aligned pair is one
     component. ``trim`` cuts that many frames at both ends of both clips first (default 0; the authors' code
     cuts 60 frames of the transferred clip). Statistics as in :func:`summarize_errors`.
@@ -179,7 +180,7 @@ def style_error(transfer_vel, style_vel, window: int, *, trim: int = 0, joint_di
 def _world(world_positions, name: str) -> np.ndarray:
     p = np.asarray(world_positions, np.float64)
     if p.ndim != 3 or p.shape[-1] != 3:
-        raise DataError(f"{name}: expected world positions (frames, joints, 3), got {p.shape}")
+        raise DataError(f"{name}: expected joint positions (frames, joints, 3), got {p.shape}")
     return p
 
 
@@ -206,7 +207,7 @@ def arm_velocities(
 
 
 def hands_metres(world_positions_cm, hand_indices: Sequence[int]) -> np.ndarray:
-    """Both hands' world positions in metres: ``(F, J, 3)`` centimetres -> ``(F, 6)`` = [left xyz, right xyz].
+    """Both hands' positions in metres (world or root-local): ``(F, J, 3)`` centimetres -> ``(F, 6)`` = [left xyz, right xyz].
 
     hand_indices: (left, right) joint indices. References: Kuriyama et al. 2022, §4.2 (p^l: 6-D hand
     positions in metres).

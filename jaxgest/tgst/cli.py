@@ -111,6 +111,15 @@ def _evaluate(args) -> int:
     print(f"{report['pairs']} pairs: {report['num_pairs']} (data {report['data']}); protocol "
           f"{report['protocol']['name']}; {t['wall_s']:.0f} s wall, {t['cpu_s']:.0f} s CPU")
     print(markdown_table(report))
+    short = sum(1 for r in report["per_pair"]
+                if any("too short" in e.get("skipped", "") or "shorter than one style window" in e.get("skipped", "")
+                       for e in r["errors"].values()))
+    if short:
+        cut = report["protocol"]["trim_seconds"]
+        need = f"its {cut:g} s cut at both ends plus one style window" if cut else "one style window"
+        print(f"\n{short} of {report['num_pairs']} pairs skipped: a clip is too short for "
+              f"{need} ({report['protocol']['name']} protocol; per-pair reasons in the JSON"
+              f"{'; --trim SECONDS shortens the cut' if cut else ''})")
     diag = diagnostics_table(report)
     if diag:
         print()

@@ -185,3 +185,32 @@ def test_avatarnet_recolours_with_style_statistics():
     out = avatar(5.0 * zs - 3.0, zs)  # content = affine copy of style -> whitened equal
     np.testing.assert_allclose(np.asarray(out), np.asarray(zs), atol=1e-4)
     assert jax.eval_shape(avatar, jnp.zeros((2, 10, 4)), zs).shape == (2, 10, 4)
+
+
+# ---------------------------------------------------------------- reconstruction baselines of the autoencoder
+
+def test_block_pca_exact_at_full_rank_and_lossy_below():
+    rng = np.random.default_rng(0)
+    clips = [rng.normal(size=(n, 6)).astype(np.float32) for n in (40, 33, 57)]
+    full = baselines.block_pca_fit(clips, components=24, frames=4)  # 4 frames x 6 channels = 24 numbers
+    x = rng.normal(size=(21, 6)).astype(np.float32)
+    np.testing.assert_allclose(baselines.block_pca_reconstruct(full, x), x, atol=1e-4)
+    low = baselines.block_pca_fit(clips, components=3, frames=4)
+    assert baselines.block_pca_reconstruct(low, x).shape == (21, 6)
+    assert not np.allclose(baselines.block_pca_reconstruct(low, x), x, atol=1e-2)
+
+
+def test_mean_pose_and_per_joint_angles():
+    a = np.zeros((5, 6), np.float32)
+    a[:, 2] = 0.2  # joint 0: 0.2 rad about z
+    b = a.copy()
+    b[:, 2] = 0.6
+    b[:, 3] = np.pi - 0.05  # joint 1 near pi about x: its exp-map flips to the antipode in a
+    a[:, 3] = -(np.pi - 0.05)
+    mean = baselines.mean_pose_fit([a, b])
+    np.testing.assert_allclose(mean[:3], [0, 0, 0.4], atol=1e-5)  # rotation mean about one axis
+    assert abs(abs(mean[3]) - np.pi) < 1e-4 and np.allclose(mean[4:], 0, atol=1e-5)  # not the channel mean 0
+    x = np.zeros((4, 6), np.float32)
+    x[:, 3] = 0.5  # joint 1 turned by 0.5 rad about x; joint 0 at the identity
+    err = baselines.per_joint_angle_deg(np.zeros(6, np.float32), x)
+    np.testing.assert_allclose(err, [0.0, np.degrees(0.5)], atol=1e-3)

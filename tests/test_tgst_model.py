@@ -15,6 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxgest.tgst import api
+from jaxgest.tgst import data as tdata
+from jaxgest.tgst import model as tmodel
 from jaxgest.tgst.autoencoder import (MotionAutoencoder, expmap_reconstruction_loss, mean_angular_error_deg,
                                       upsample_linear)
 from jaxgest.tgst.config import TGSTConfig, config_from_dict, get_config
@@ -103,7 +105,11 @@ def test_autoencoder_layer_sizes_and_shapes():
 
 
 def test_config_json_round_trip_and_validation():
-    for name in ("paper", "tiny"):
+    from jaxgest.tgst.config import PRESETS
+    from jaxgest.tgst.train import DEFAULT_STEPS
+
+    assert set(PRESETS) == set(DEFAULT_STEPS)
+    for name in PRESETS:
         cfg = get_config(name)
         assert config_from_dict(json.loads(json.dumps(dataclasses.asdict(cfg)))) == cfg
         hash(cfg)  # usable as a jit static argument
@@ -199,9 +205,9 @@ def test_tokens_beyond_omega_have_no_influence(encoders, i, j, impl):
 
 def test_all_methods_run_with_right_shapes(params):
     content, style = _smooth_motion(1, 2, 50, 39), _smooth_motion(2, 2, 70, 39)
-    methods = ("soft", "hard", "adain", "avatarnet")
+    methods = tmodel.METHODS
 
-    @jax.jit  # one compilation for the four methods
+    @jax.jit  # one compilation for the five methods
     def run_all(params, content, style):
         return {m: transfer_arrays(params, content, style, cfg=CFG, method=m) for m in methods}
 
@@ -209,7 +215,11 @@ def test_all_methods_run_with_right_shapes(params):
     for method, (up, lo, aux) in results.items():
         assert up.shape == (2, 50, 39) and lo.shape == (2, 50, 24), method
         assert bool(jnp.isfinite(up).all() & jnp.isfinite(lo).all()), method
-        assert aux["content_latents"].shape == (2, 16, 16)  # 50 frames -> padded 64 -> 16 latent frames
+        # 50 frames + 16 edge frames at both ends -> padded 96 -> 24 latent frames
+        assert aux["content_latents"].shape == (2, 24, 16)
+    recon = jax.jit(tmodel.reconstruct, static_argnames="cfg")(params["autoencoder"], content, cfg=CFG)
+    np.testing.assert_allclose(np.asarray(results["autoencoder"][0]), np.asarray(recon[0]), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(results["autoencoder"][1]), np.asarray(recon[1]), atol=1e-6)
     assert not np.allclose(np.asarray(results["soft"][0]), np.asarray(results["adain"][0]))
     with pytest.raises(ValueError, match="unknown transfer method"):
         transfer_arrays(params, content, style, cfg=CFG, method="magic")
@@ -282,3 +292,160 @@ def test_transformer_loss_decreases(params):
     assert set(metrics) == {"loss", "identity", "cyclic", "structure", "appearance"}
     assert all(bool(jnp.isfinite(v)) for v in metrics.values())
     assert float(metrics["loss"]) < 0.8 * float(first["loss"])
+
+
+# ---------------------------------------------------------------- clip ends, swap weights, recipe options
+
+def test_pad_clip_replicates_both_ends_and_trims_back():
+    x = _smooth_motion(11, 2, 37, 39)
+    p = tmodel.pad_clip(x, cfg=CFG)
+    lead, total = tmodel.edge_layout(37, cfg=CFG)
+    assert lead == 16 and p.shape == (2, total, 39) and total % CFG.frame_multiple == 0
+    assert total - 37 - lead >= lead  # the end gets at least as many copies
+    np.testing.assert_array_equal(np.asarray(p[:, :lead]), np.broadcast_to(np.asarray(x[:, :1]), (2, lead, 39)))
+    np.testing.assert_array_equal(np.asarray(p[:, lead + 37:]),
+                                  np.broadcast_to(np.asarray(x[:, -1:]), (2, total - lead - 37, 39)))
+    np.testing.assert_array_equal(np.asarray(tmodel.trim_clip(p, 37, cfg=CFG)), np.asarray(x))
+    with pytest.raises(ValueError, match="edge_frames"):
+        dataclasses.replace(CFG, edge_frames=4)  # tokens would not start at the clip's first frame
+
+
+def test_constant_clip_reconstructs_constant_at_the_ends(params):
+    """With edge padding the encoder's zero padding never reaches a real frame: a held pose decodes to the
+    same pose on every frame, the first and last included (without it the first frames differ)."""
+    pose = _normal(12, (1, 1, 39), 0.5)
+    x = jnp.broadcast_to(pose, (1, 48, 39))
+    rec = jax.jit(tmodel.reconstruct, static_argnames="cfg")
+    for cfg, constant in ((CFG, True), (dataclasses.replace(CFG, edge_frames=0), False)):
+        up, lo = rec(params["autoencoder"], x, cfg=cfg)
+        for y in (np.asarray(up[0]), np.asarray(lo[0])):
+            spread = np.abs(y - y[20]).max()
+            assert (spread < 1e-5) == constant, (cfg.edge_frames, spread)
+
+
+def test_swap_weights_rows_on_simplex_and_match_transfer(params):
+    content, style = _smooth_motion(13, 2, 50, 39), _smooth_motion(14, 2, 70, 39)
+    fn = jax.jit(tmodel.swap_weights, static_argnames="cfg")
+    w = np.asarray(fn(params, content, style, cfg=CFG))
+    n_c = tmodel.num_tokens(-(-50 // 4))  # tokens of the real content frames only
+    n_s = tmodel.num_tokens(-(-70 // 4))
+    assert w.shape == (2, n_c, n_s)
+    np.testing.assert_allclose(w.sum(-1), 1.0, rtol=1e-5)
+    _, _, aux = jax.jit(transfer_arrays, static_argnames=("cfg", "method"))(params, content, style, cfg=CFG)
+    np.testing.assert_allclose(np.asarray(aux["swap_weights"])[:, 2:2 + n_c], w, atol=1e-6)
+
+
+@pytest.mark.parametrize("similarity,positions", [("dot", "none"), ("scaled", "index"), ("scaled", "none")])
+def test_swap_options_run_and_keep_the_simplex(params, similarity, positions):
+    cfg = dataclasses.replace(CFG, swap_similarity=similarity,
+                              transformer=dataclasses.replace(CFG.transformer, token_positions=positions))
+    content, style = _smooth_motion(15, 1, 40, 39), _smooth_motion(16, 1, 40, 39)
+    w = np.asarray(jax.jit(tmodel.swap_weights, static_argnames="cfg")(params, content, style, cfg=cfg))
+    np.testing.assert_allclose(w.sum(-1), 1.0, rtol=1e-5)
+    if similarity == "scaled":  # bounded logits: no row can be one-hot from untrained random tokens
+        assert w.max() < 0.99
+    with pytest.raises(ValueError, match="swap_similarity"):
+        dataclasses.replace(CFG, swap_similarity="cosine")
+
+
+def test_standardized_autoencoder_statistics_are_frozen():
+    from jaxgest.tgst.steps import ae_loss_terms
+
+    cfg = dataclasses.replace(CFG, autoencoder=dataclasses.replace(CFG.autoencoder, standardize=True))
+    p = init_params(cfg, jax.random.PRNGKey(0))["autoencoder"]
+    stats = {"upper_mean": jnp.full((39,), 0.3), "upper_std": jnp.full((39,), 2.0),
+             "lower_mean": jnp.full((24,), -0.2), "lower_std": jnp.full((24,), 0.5)}
+    p = dict(p, **stats)
+    batch = {"upper": _smooth_motion(17, 2, 32, 39), "lower": _smooth_motion(18, 2, 32, 24)}
+    grads = jax.jit(jax.grad(lambda q: jnp.mean(ae_loss_terms(q, batch, cfg=cfg)["loss"])))(p)
+    tx = optax.adam(1e-2)
+    updates, _ = tx.update(grads, tx.init(p), p)
+    new = optax.apply_updates(p, updates)
+    for k, v in stats.items():  # no gradient reaches the statistics, so Adam leaves them exactly unchanged
+        np.testing.assert_array_equal(np.asarray(grads[k]), 0.0)
+        np.testing.assert_array_equal(np.asarray(new[k]), np.asarray(v))
+    assert np.abs(np.asarray(grads["encoder"]["conv_0"]["kernel"])).max() > 0
+    # the statistics are used: the output is mean + std * (decoder output)
+    rec = jax.jit(tmodel.reconstruct, static_argnames="cfg")
+    up, _ = rec(p, batch["upper"], cfg=cfg)
+    up0, _ = rec(dict(p, upper_mean=jnp.zeros(39)), batch["upper"], cfg=cfg)
+    assert not np.allclose(np.asarray(up), np.asarray(up0))
+
+
+def test_stored_config_without_new_fields_keeps_old_behaviour():
+    from jaxgest.tgst.config import with_stored_defaults
+
+    new = get_config("paper")
+    old = dataclasses.asdict(new)
+    for k in ("edge_frames", "swap_similarity", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling"):
+        old.pop(k)
+    old["transformer"].pop("token_positions")
+    old["autoencoder"].pop("standardize")
+    cfg = with_stored_defaults(new, old)
+    assert cfg.edge_frames == 0 and cfg.swap_similarity == "dot" and cfg.transformer.token_positions == "index"
+    assert with_stored_defaults(new, dataclasses.asdict(new)) == new
+
+
+def test_content_balanced_window_sampling():
+    lengths = np.array([400] * 9 + [100])  # nine long clips of content "walk", one short "wave"
+    groups = ["walk"] * 9 + ["wave"]
+    rng = np.random.default_rng(0)
+    idx = tdata.sample_windows_idx(lengths, 64, 4000, rng, [str(i) for i in range(10)], groups=groups)
+    share = np.mean([i == 9 for i, _ in idx])
+    assert 0.45 < share < 0.55  # uniform over windows would give 37 / (9 * 337 + 37) ~ 1 %
+    assert all(0 <= s <= lengths[i] - 64 for i, s in idx)
+
+
+def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
+    from jaxgest.errors import JaxgestError
+    from jaxgest.tgst.train import apply_overrides
+
+    cfg = apply_overrides(get_config("fit"), {"swap_similarity": "scaled", "transformer.token_positions": "index",
+                                              "autoencoder.standardize": False})
+    assert cfg.swap_similarity == "scaled" and cfg.transformer.token_positions == "index"
+    assert not cfg.autoencoder.standardize and cfg.edge_frames == 16
+    assert apply_overrides(TINY, None) == TINY
+    with pytest.raises(JaxgestError, match="override"):
+        apply_overrides(TINY, {"swap_similarity": "cosine"})
+
+
+def test_ae_batch_without_mirrored_clips():
+    up = [np.full((80, 39), float(i), np.float32) for i in range(3)]
+    lo = [np.zeros((80, 24), np.float32) for _ in range(3)]
+    mup = [np.full((80, 39), -1.0 - i, np.float32) for i in range(3)]  # mirrored copies: negative values
+    data = tdata.BodyData(up, lo, mup, lo, ["a", "b", "c"], 60.0, ["x", "x", "y"])
+    for mirror in (True, False):
+        cfg = dataclasses.replace(TINY, ae_mirror=mirror, ae_batch_size=64, ae_sampling="content")
+        b = tdata.ae_batch(data, cfg, 0, 0)["upper"]
+        assert b.shape == (64, cfg.ae_window, 39)
+        assert bool((b < 0).any()) == mirror
+
+
+def test_checkpoint_of_an_older_version_still_matches(tmp_path):
+    """A checkpoint whose config predates the added fields resumes/loads with a config that has them at their
+    old defaults; another value of such a field is still reported as a mismatch."""
+    import types
+
+    from jaxgest import training
+    from jaxgest.errors import CheckpointError
+    from jaxgest.tgst.config import with_stored_defaults
+    from jaxgest.tgst.train import AE_IGNORED, AE_KIND, AE_SUBDIR, ae_checkpointer
+
+    old = dataclasses.asdict(TINY)
+    for k in ("edge_frames", "swap_similarity", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling", "ae_mirror"):
+        old.pop(k)
+    old["autoencoder"].pop("standardize")
+    old["transformer"].pop("token_positions")
+    ck = training.Checkpointer(tmp_path, kind=AE_KIND, config=old, skeleton=tdata.BODY_SIGNATURE, subdir=AE_SUBDIR,
+                               ignore=AE_IGNORED)
+    ck.save(types.SimpleNamespace(params={"w": jnp.ones(3)}, opt_state={}, step=jnp.asarray(5)))
+    ck.close()
+    cfg = with_stored_defaults(get_config("tiny"), old)  # edge_frames 0 etc.: the old behaviour
+    assert cfg.edge_frames == 0 and cfg.ae_mirror
+    probe = ae_checkpointer(tmp_path, cfg, read_only=True)
+    probe.check_meta(probe.stored_meta())  # no mismatch
+    probe.close()
+    probe = ae_checkpointer(tmp_path, dataclasses.replace(cfg, ae_mirror=False), read_only=True)
+    with pytest.raises(CheckpointError, match="ae_mirror"):
+        probe.check_meta(probe.stored_meta())
+    probe.close()

@@ -1,26 +1,29 @@
-"""Where does the style error of TGST results come from? Autoencoder round trips of the held-out clips.
+"""Autoencoder and swap diagnostics on the held-out clips: what the model does before any style is involved.
 
-    python experiments/tgst_bandai/diagnose.py WORKDIR EVAL_DIR OUT.json [TRAIN_DIR]
+    python experiments/tgst_bandai/diagnose.py WORKDIR EVAL_DIR OUT.json [TRAIN_DIR] [--ae-step N] [--no-swap]
+        [--edge-frames N]
 
-For every held-out clip x (all styles), each variant below is written back on x's skeleton with
-jaxgest.motion.body.body_to_motion (x's root path, feet on the floor, as `jaxgest tgst transfer` does) and
-scored against x itself with the evaluation's errors (content error, m; style error, m/s) plus the mean
-arm-joint speed (m/s):
+1. Reconstruction against baselines with the same inputs (upper body, 13 joints, model rate, geodesic
+   angle per joint, degrees): the autoencoder round trip (jaxgest.tgst.model.reconstruct: the clip-end
+   handling of every encode path), PCA-16 (16 numbers per 4 frames, the autoencoder's latent budget, fitted
+   on TRAIN_DIR's original and mirrored clips) and the mean pose (constant predictor, same data). Per joint
+   and overall; also the first frame against the interior (frames 16 .. F-17) for the autoencoder.
+2. Round trips as motions: each held-out clip x is re-encoded and decoded (upper and lower body), written on
+   x's skeleton as `jaxgest tgst transfer --method autoencoder` does (TGSTModel.to_motion), and compared
+   with x: mean arm-joint speed ratio (world positions, forward differences, 8 arm joints) overall and on
+   frames 0-5, per-joint interior speed ratio (frames 6 .. F-7), style and content error of the round trip
+   under the world protocol and the authors' protocol (jaxgest.tgst.evaluate).
+3. Swap diagnostics (needs a trained transformer; skip with --no-swap) on the inter pairs of the held-out
+   contents via jaxgest.tgst.model.swap_weights: mean largest soft-swap weight, effective number of blended
+   style tokens 1 / sum w^2, fraction of content tokens whose argmax style token lies within +-1 index of
+   the content token's own index, and the chance of that fraction (3 / Ns per token, clipped at the ends).
 
-* roundtrip: x's own body exp-maps, no network (the conversion and floor placement alone);
-* ae_upper: the autoencoder's reconstruction of the upper body, x's own lower body;
-* ae_full: the autoencoder's reconstruction of both halves (the lower body decoded from the upper latents),
-  i.e. a transfer with a perfect identity swap.
-
-The autoencoder's mean angular reconstruction error (degrees, upper body, at the model rate) is reported
-for the held-out clips and, when TRAIN_DIR is given, for the training clips (paper §4.1 compares the two).
-It also reports how sharp the soft swap (eq. 4) is on the intra-scenario pairs of the held-out contents:
-the mean over content tokens of the largest swap weight (1 = the hard swap of eq. 19) and of the
-effective number of style tokens blended, exp(entropy).
+Without TRAIN_DIR the PCA and mean-pose baselines are skipped.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -29,77 +32,174 @@ import numpy as np
 
 from jaxgest import metrics
 from jaxgest.motion import body, datasets
+from jaxgest.tgst import baselines
 from jaxgest.tgst import model as tmodel
-from jaxgest.tgst.api import load_model, resample_body
-from jaxgest.tgst.autoencoder import mean_angular_error_deg
-from jaxgest.tgst.evaluate import clip_features, features_errors
-from jaxgest.tgst.tokens import pad_frames, trim_frames  # the padding of transfer_arrays
+from jaxgest.tgst.autoencoder import angular_error_rad
+from jaxgest.tgst.config import config_from_dict
+from jaxgest.tgst.evaluate import clip_features, features_errors, make_pairs
+
+TRUNK = ("Hips", "Spine", "Chest", "Neck", "Head")
+
+
+def load_params(workdir, ae_step=None, transformer=True):
+    """(cfg, params) of a workdir; the transformer is optional (an autoencoder-only workdir)."""
+    import pathlib
+
+    from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
+
+    stored = json.loads((pathlib.Path(workdir) / "config.json").read_text())
+    cfg = config_from_dict(stored["config"])
+    template = jax.eval_shape(lambda k: tmodel.init_params(cfg, k), jax.random.PRNGKey(0))
+    ck = ae_checkpointer(workdir, cfg, read_only=True)
+    params = {"autoencoder": ck.restore_params(template["autoencoder"], step=ae_step)}
+    ck.close()
+    if transformer:
+        ck = transformer_checkpointer(workdir, cfg, None, read_only=True)
+        params["transformer"] = ck.restore_params(template["transformer"])
+        ck.close()
+    return cfg, params
+
+
+def body_upper_lower(motion, fps):
+    bc = body.motion_to_body(datasets.resample_motion(motion, fps))
+    return bc.upper.astype(np.float32), bc.lower.astype(np.float32)
+
+
+def speeds(arm_vel):
+    """(F, 24) arm velocities -> (F, 8) speeds."""
+    return np.linalg.norm(arm_vel.reshape(len(arm_vel), -1, 3), axis=-1)
 
 
 def main(argv) -> int:
-    workdir, data_dir, out = argv[1:4]
-    train_dir = argv[4] if len(argv) > 4 else None
-    m = load_model(workdir)
-    cfg = m.cfg
+    ap = argparse.ArgumentParser()
+    ap.add_argument("workdir"), ap.add_argument("eval_dir"), ap.add_argument("out")
+    ap.add_argument("train_dir", nargs="?")
+    ap.add_argument("--ae-step", type=int, default=None)
+    ap.add_argument("--no-swap", action="store_true")
+    ap.add_argument("--edge-frames", type=int, default=None,
+                    help="override the config's edge padding (0 = the old end-only padding, for comparison)")
+    args = ap.parse_args(argv[1:])
+    cfg, params = load_params(args.workdir, args.ae_step, transformer=not args.no_swap)
+    if args.edge_frames is not None:
+        import dataclasses
 
-    @jax.jit
-    def recon(upper):
-        z = tmodel.encode(m.params["autoencoder"], pad_frames(upper, cfg.frame_multiple, min_frames=cfg.min_frames),
-                          cfg=cfg)
-        u, lo = tmodel.decode(m.params["autoencoder"], z, cfg=cfg)
-        return trim_frames(u, upper.shape[1]), trim_frames(lo, upper.shape[1])
+        cfg = dataclasses.replace(cfg, edge_frames=args.edge_frames)
+    rec_jit = jax.jit(lambda p, u: tmodel.reconstruct(p, u[None], cfg=cfg))
 
-    def angle(clip_list):
-        out = []
-        for c in clip_list:
-            up = body.motion_to_body(datasets.resample_motion(c.motion, cfg.fps)).upper.astype(np.float32)[None]
-            out.append(float(mean_angular_error_deg(recon(up)[0], up)[0]))
-        return float(np.mean(out))
+    def rec(p, u):  # the end replicated up to a multiple of 128 frames: fewer compilations, same real frames
+        f = len(u)
+        u = np.concatenate([u, np.repeat(u[-1:], -f % 128, axis=0)])
+        return tuple(a[:, :f] for a in rec_jit(p, u))
+    clips = datasets.load_folder(args.eval_dir, progress=False)
+    held = [body_upper_lower(c.motion, cfg.fps) for c in clips]
+    report = {"workdir": args.workdir, "config": cfg.name, "ae_step": args.ae_step, "num_clips": len(clips),
+              "edge_frames": cfg.edge_frames}
 
-    rows = {k: [] for k in ("clip", "roundtrip", "ae_upper", "ae_full")}
-    clips = datasets.load_folder(data_dir, progress=False)
-    for clip in clips:
+    # ---- 1. angles: AE vs PCA-16 vs mean pose
+    per_joint = {"autoencoder": []}
+    first, interior = [], []
+    ae_out = []
+    for up, lo in held:
+        u_hat, l_hat = (np.asarray(a[0]) for a in rec(params["autoencoder"], up))
+        ae_out.append((u_hat, l_hat))
+        per_joint["autoencoder"].append(baselines.per_joint_angle_deg(u_hat, up))
+        err = np.degrees(np.asarray(angular_error_rad(u_hat, up)))  # (F, 13)
+        first.append(err[0].mean())
+        interior.append(err[16:-16].mean() if len(err) > 40 else err.mean())
+    if args.train_dir:
+        import pathlib
+
+        cache = pathlib.Path(args.workdir).resolve().parent / "recon_baselines_cache.npz"  # same TRAIN_DIR
+        if cache.is_file():
+            z = np.load(cache)
+            pca = {"mean": z["pca_mean"], "basis": z["pca_basis"], "frames": int(z["pca_frames"])}
+            mean_pose = z["mean_pose"]
+        else:
+            from jaxgest.motion import kinematics
+
+            train_clips = datasets.load_folder(args.train_dir, progress=False)
+            train_up = [body_upper_lower(c.motion, cfg.fps)[0] for c in train_clips]
+            train_up += [body_upper_lower(kinematics.mirror(c.motion), cfg.fps)[0] for c in train_clips]
+            pca = baselines.block_pca_fit(train_up, components=cfg.autoencoder.latent_dim,
+                                          frames=cfg.autoencoder.time_reduction)
+            mean_pose = baselines.mean_pose_fit(train_up)
+            np.savez(cache, pca_mean=pca["mean"], pca_basis=pca["basis"], pca_frames=pca["frames"],
+                     mean_pose=mean_pose)
+        per_joint["pca16"] = [baselines.per_joint_angle_deg(baselines.block_pca_reconstruct(pca, up), up)
+                              for up, _ in held]
+        per_joint["mean_pose"] = [baselines.per_joint_angle_deg(mean_pose, up) for up, _ in held]
+    joints = list(body.UPPER)
+    report["angle_deg"] = {
+        k: {"mean": float(np.mean(v)), "per_joint": dict(zip(joints, np.mean(v, axis=0).round(3).tolist()))}
+        for k, v in per_joint.items()}
+    report["ae_first_frame_deg"] = float(np.mean(first))
+    report["ae_interior_deg"] = float(np.mean(interior))
+
+    # ---- 2. round trips as motions at the clip rate (written like `jaxgest tgst transfer` writes a result)
+    from jaxgest.motion import kinematics
+    from jaxgest.tgst.api import TGSTModel
+    from jaxgest.tgst.evaluate import _joint_indices, get_protocol
+
+    writer = TGSTModel(cfg, params)
+    rows = []
+    for clip, (u_hat, l_hat) in zip(clips, ae_out):
         x = clip.motion
-        F = x.num_frames
-        bc = body.motion_to_body(datasets.resample_motion(x, cfg.fps))
-        u, lo = (np.asarray(a[0]) for a in recon(bc.upper.astype(np.float32)[None]))
-        true_u = resample_body(bc.upper.astype(np.float32), cfg.fps, x.fps, F)
-        true_l = resample_body(bc.lower.astype(np.float32), cfg.fps, x.fps, F)
-        ae_u, ae_l = resample_body(u, cfg.fps, x.fps, F), resample_body(lo, cfg.fps, x.fps, F)
-        fx = clip_features(x)
+        y = writer.to_motion(u_hat, l_hat, x)
+        arms = _joint_indices(x, body.ARMS)
+        sx, sy = (np.linalg.norm(np.diff(kinematics.forward_kinematics(m)[:, arms], axis=0), axis=-1)
+                  * x.fps * 0.01 for m in (x, y))  # (F-1, 8) world arm-joint speeds, m/s, forward differences
+        r = {"clip": clip.path.name, "speed_ratio": float(sy.mean() / sx.mean()),
+             "speed_ratio_0_5": float(sy[:6].mean() / sx[:6].mean()),
+             "joint_interior_ratio": (sy[6:-6].mean(0) / sx[6:-6].mean(0)).tolist(),
+             "first_step_speed": float(sy[0].mean()), "first_step_speed_input": float(sx[0].mean())}
         window = metrics.window_for_fps(x.fps)
-        if len(fx[1]) < window:
-            continue
-        rows["clip"].append({"speed": float(np.linalg.norm(fx[1].reshape(len(fx[1]), -1, 3), axis=-1).mean())})
-        for name, (uu, ll) in {"roundtrip": (true_u, true_l), "ae_upper": (ae_u, true_l),
-                               "ae_full": (ae_u, ae_l)}.items():
-            y = body.body_to_motion(uu, ll, x, floor=True)
-            fy = clip_features(y)
-            e = features_errors(fy, fx, fx, window=window)
-            rows[name].append({"content": e["content"]["mean"], "style": e["style"]["mean"],
-                               "speed": float(np.linalg.norm(fy[1].reshape(len(fy[1]), -1, 3), axis=-1).mean())})
-    from jaxgest.tgst.evaluate import make_pairs
-    from jaxgest.tgst.model import transfer_arrays
+        for proto in ("world", "authors"):
+            try:
+                fx = clip_features(x, protocol=proto)
+                e = features_errors(clip_features(y, protocol=proto), fx, clip_features(x, protocol=proto,
+                                    reference=get_protocol(proto).mirror_style), window=window)
+                r[f"style_{proto}"], r[f"content_{proto}"] = e["style"]["mean"], e["content"]["mean"]
+            except Exception as err:  # too short for the protocol's cut or one window
+                r[f"skipped_{proto}"] = str(err)
+        rows.append(r)
+    jr = np.array([r["joint_interior_ratio"] for r in rows])
+    report["roundtrip"] = {
+        "speed_ratio": float(np.mean([r["speed_ratio"] for r in rows])),
+        "speed_ratio_0_5": float(np.mean([r["speed_ratio_0_5"] for r in rows])),
+        "first_step_speed": float(np.mean([r["first_step_speed"] for r in rows])),
+        "first_step_speed_input": float(np.mean([r["first_step_speed_input"] for r in rows])),
+        "joint_interior_ratio": dict(zip(body.ARMS, jr.mean(0).round(3).tolist())),
+        **{f"{k}_{p}": float(np.mean([r[f"{k}_{p}"] for r in rows if f"{k}_{p}" in r]))
+           for k in ("style", "content") for p in ("world", "authors")},
+        **{f"clips_{p}": sum(f"style_{p}" in r for r in rows) for p in ("world", "authors")},
+        "clips": rows}
 
-    soft = jax.jit(lambda p, c, st: transfer_arrays(p, c, st, cfg=cfg, method="soft")[2]["swap_weights"])
-    sharp = []
-    for pair in make_pairs(clips, "intra"):
-        c = m.body_arrays(pair.content.motion, "content")[None]
-        st = m.body_arrays(pair.style.motion, "style")[None]
-        w = np.asarray(soft(m.params, c, st))[0]  # (Nc, Ns)
-        ent = -(w * np.log(np.clip(w, 1e-12, None))).sum(-1)
-        sharp.append({"max_weight": float(w.max(-1).mean()), "effective_tokens": float(np.exp(ent).mean())})
-    ae_angle = {"held_out": angle(clips)}
-    if train_dir is not None:
-        ae_angle["train"] = angle(datasets.load_folder(train_dir, progress=False))
-    report = {"workdir": workdir, "data": data_dir, "num_clips": len(rows["clip"]),
-              "mean": {k: {m_: float(np.mean([r[m_] for r in v])) for m_ in v[0]} for k, v in rows.items()},
-              "ae_angle_deg": ae_angle,
-              "soft_swap": {"num_pairs": len(sharp), **{k: float(np.mean([r[k] for r in sharp])) for k in sharp[0]}}}
-    with open(out, "w") as f:
+    # ---- 3. swap diagnostics on inter pairs
+    if not args.no_swap:
+        sw = jax.jit(lambda p, c, s: tmodel.swap_weights(p, c[None], s[None], cfg=cfg)[0])
+        idx = {c.path: i for i, c in enumerate(clips)}
+        out = []
+        for pair in make_pairs(clips, "inter"):
+            c_up, s_up = held[idx[pair.content.path]][0], held[idx[pair.style.path]][0]
+            out.append(swap_stats(np.asarray(sw(params, c_up, s_up))))
+        report["swap_inter"] = {"num_pairs": len(out), **{k: float(np.mean([o[k] for o in out])) for k in out[0]}}
+    with open(args.out, "w") as f:
         json.dump(report, f, indent=1)
-    print(json.dumps({k: report[k] for k in ("mean", "ae_angle_deg", "soft_swap")}, indent=1))
+    print(json.dumps({k: v for k, v in report.items() if k != "roundtrip"}, indent=1))
+    print(json.dumps({k: v for k, v in report["roundtrip"].items() if k != "clips"}, indent=1))
     return 0
+
+
+def swap_stats(w: np.ndarray) -> dict:
+    """Diagnostics of one soft-swap weight matrix ``(Nc, Ns)`` (rows on the simplex)."""
+    nc, ns = w.shape
+    arg = w.argmax(-1)
+    n = np.arange(nc)
+    near = np.abs(arg - n) <= 1
+    lo, hi = np.clip(n - 1, 0, ns - 1), np.clip(n + 1, 0, ns - 1)
+    chance = np.where(n < ns, (hi - lo + 1) / ns, np.where(n - 1 < ns, 1 / ns, 0.0))
+    return {"max_weight": float(w.max(-1).mean()), "effective_tokens": float((1.0 / np.sum(w ** 2, axis=-1)).mean()),
+            "argmax_within_1": float(near.mean()), "chance_within_1": float(chance.mean())}
 
 
 if __name__ == "__main__":

@@ -70,6 +70,9 @@ class MotionAutoencoder(nn.Module):
     ``ConvTranspose1d(k=3, padding=1, stride=1)`` of the authors' code is a same-size convolution with a
     flipped kernel, i.e. an ordinary ``padding=1`` convolution here (same parameter count).
     ``__call__`` (used for ``init``) returns ``((upper, lower), {"latents": z})``.
+    ``config.standardize`` adds the per-channel mean and std of the training data as four frozen parameter
+    arrays (``upper_mean``/``upper_std`` (39), ``lower_mean``/``lower_std`` (24); gradients stopped, so Adam
+    leaves them unchanged): inputs are standardised and outputs de-standardised (not in the paper).
     References: Kuriyama et al. 2022, App. A.
     """
 
@@ -101,21 +104,43 @@ class MotionAutoencoder(nn.Module):
             final_activation=False,
         )
 
+        if c.standardize:  # frozen data statistics (set by training, never updated: stop_gradient below)
+            zeros, ones = nn.initializers.zeros, nn.initializers.ones
+            self.upper_mean = self.param("upper_mean", zeros, (c.upper_channels,))
+            self.upper_std = self.param("upper_std", ones, (c.upper_channels,))
+            self.lower_mean = self.param("lower_mean", zeros, (c.lower_channels,))
+            self.lower_std = self.param("lower_std", ones, (c.lower_channels,))
+
+    def _stats(self, part: str):
+        sg = jax.lax.stop_gradient
+        return sg(getattr(self, f"{part}_mean"))[None, None], sg(getattr(self, f"{part}_std"))[None, None]
+
     def encode(self, upper: jax.Array) -> jax.Array:
         """Upper-body exp-maps ``(batch, F, 39)`` -> latents ``(batch, ceil(F / 4), 16)``."""
         chex.assert_rank(upper, 3)
         chex.assert_axis_dimension(upper, 2, self.config.upper_channels)
+        if self.config.standardize:
+            mean, std = self._stats("upper")
+            upper = (upper - mean) / std
         return self.encoder(upper)
 
     def decode_upper(self, z: jax.Array) -> jax.Array:
         """Latents ``(batch, T, 16)`` -> upper-body exp-maps ``(batch, 4T, 39)``."""
         chex.assert_rank(z, 3)
-        return self.upper_decoder(z)
+        y = self.upper_decoder(z)
+        if self.config.standardize:
+            mean, std = self._stats("upper")
+            y = mean + std * y
+        return y
 
     def decode_lower(self, z: jax.Array) -> jax.Array:
         """Latents ``(batch, T, 16)`` -> lower-body exp-maps ``(batch, 4T, 24)``."""
         chex.assert_rank(z, 3)
-        return self.lower_decoder(z)
+        y = self.lower_decoder(z)
+        if self.config.standardize:
+            mean, std = self._stats("lower")
+            y = mean + std * y
+        return y
 
     def __call__(self, upper: jax.Array):
         z = self.encode(upper)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pathlib
 
 from jaxgest.errors import DataError
+from jaxgest.tgst.config import PRESETS
 from jaxgest.tgst.model import METHODS
 
 
@@ -17,7 +18,7 @@ def register(subparsers) -> None:
     t.add_argument("--data", default=None, help="folder: Bandai-Namco files, ZEGGS layout or manifest.csv "
                    "(default: the built-in synthetic data, written to W/synthetic-data)")
     t.add_argument("--workdir", required=True, help="run folder (config.json, checkpoints, metrics.jsonl)")
-    t.add_argument("--preset", default="tiny", choices=("tiny", "paper"))
+    t.add_argument("--preset", default="tiny", choices=PRESETS)
     t.add_argument("--steps", type=int, default=None,
                    help="steps of EACH stage (default: tiny 200, paper 10000); see also --ae-steps")
     t.add_argument("--ae-steps", type=int, default=None, help="autoencoder steps (overrides --steps)")

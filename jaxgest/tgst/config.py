@@ -6,9 +6,16 @@ Presets (``get_config(name)``):
   (one LayerNorm per block shared by both residuals, as in the authors' code; ``layernorms_per_block=2``
   gives 50,496). AE: Adam 1e-4, batch 32, 256-frame windows; transformer: Adam 1e-4, batch 8, 1280-frame
   windows. Default ``variant="paper"``: pre-LN ("layer normalization as a preprocessing step", §3.4),
-  band mask |i - j| <= omega, sinusoidal positions over the token index.
+  band mask |i - j| <= omega, sinusoidal positions over the token index; clips replicate-padded by 16
+  frames at both ends (SPEC §3).
   Command: ``jaxgest tgst train --data DIR --workdir W --preset paper``; the paper trains 1000 epochs
   (hours on a CPU); expect an AE mean angular error of a few degrees on Bandai-Namco.
+* ``"fit"`` -- the paper's sizes (same parameter counts, plus 126 frozen normalisation numbers) with a
+  recipe for real data: the autoencoder standardises its channels with the training data's statistics,
+  trains at Adam 1e-3 with a warm-up and cosine decay (6,000 steps) on content-balanced windows (each
+  content label equally often); the transformer's tokens carry no positions (``token_positions="none"``,
+  as in the authors' code) so the soft swap matches tokens by content, not by index.
+  Command: ``jaxgest tgst train --data DIR --workdir W --preset fit``. See experiments/tgst_bandai.
 * ``"tiny"`` -- the same (already tiny) widths, but short windows and small batches (AE window 64, batch 4;
   transformer window 128, batch 4) and Adam 1e-3 so tests and ``jaxgest demo --quick`` train in seconds
   to a minute on a CPU. Not the paper's training setup.
@@ -29,6 +36,11 @@ from typing import Any, Mapping
 
 VARIANTS = ("paper", "authors")
 ATTENTION_IMPLS = ("blockwise", "dense")
+TOKEN_POSITIONS = ("index", "none")
+SWAP_SIMILARITIES = ("dot", "scaled")
+AE_LR_SCHEDULES = ("constant", "cosine")
+AE_SAMPLINGS = ("windows", "content")
+PRESETS = ("tiny", "paper", "fit")  # names accepted by get_config
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,6 +56,9 @@ class AutoencoderConfig:
     lower_decoder_channels: tuple[int, ...] = (16, 32)  # hidden widths of the lower decoder (-> 24)
     decoder_kernels: tuple[int, ...] = (3, 3, 1)  # kernel widths of the three decoder convs
     decoder_upsample: tuple[int, ...] = (2, 2, 1)  # linear x2 upsampling before each decoder conv (1 = none)
+    # per-channel standardisation: the encoder sees (x - mean) / std and the decoders predict mean + std * y,
+    # with the training data's statistics stored as (frozen) parameters; False = the paper's raw exp-maps
+    standardize: bool = False
 
     @property
     def latent_dim(self) -> int:
@@ -69,6 +84,10 @@ class TransformerConfig:
     attention_impl: str = "blockwise"  # "blockwise": O(N * omega) banded attention; "dense": masked reference
     block_size: int = 32  # query block length of the blockwise attention; must be >= omega
     max_authors_pe: int = 150  # authors' variant: length of the positional table (indexed by batch, a bug)
+    # paper variant: "index" adds sinusoidal positions over the token index (eq. 2 read literally; the swap
+    # can then match by position), "none" adds none (the tokens carry no position, as in the authors' code,
+    # whose table is added along the batch axis); the band mask still limits attention to neighbours
+    token_positions: str = "index"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,6 +117,16 @@ class TGSTConfig:
     transformer_batch_size: int = 8  # content/style pairs per transformer batch (§3.5)
     transformer_window: int = 1280  # frames per content/style training clip (§3.5)
     swap_temperature: float = 1.0  # softmax temperature of the soft swap (1 = eq. 4)
+    # similarity of the swap: "dot" = plain dot product (eq. 4 as printed); "scaled" = both sides
+    # LayerNorm-ed (no parameters) and divided by sqrt(d_g) before the temperature
+    swap_similarity: str = "dot"
+    # replicate-pad every clip by this many frames at BOTH ends before encoding and trim after decoding
+    # (SPEC §3, clip ends); a multiple of the encoder's total stride. 0 = the end-only padding of old runs
+    edge_frames: int = 0
+    ae_lr_schedule: str = "constant"  # "constant" (§3.5) or "cosine" (warm-up, cosine decay to 10 %)
+    ae_lr_decay_steps: int = 10_000  # length of the cosine schedule (steps); constant lr afterwards
+    ae_sampling: str = "windows"  # "windows": uniform over all windows; "content": each content label equally
+    ae_mirror: bool = True  # the autoencoder also sees the mirrored clips (False: the original clips only)
 
     def __post_init__(self):
         t = self.transformer
@@ -115,6 +144,16 @@ class TGSTConfig:
         if t.token_dim != self.token_width * self.autoencoder.latent_dim:
             raise ValueError(f"transformer.token_dim must be token_width * latent_dim = "
                              f"{self.token_width * self.autoencoder.latent_dim}, got {t.token_dim}")
+        for name, value, allowed in (("transformer.token_positions", t.token_positions, TOKEN_POSITIONS),
+                                     ("swap_similarity", self.swap_similarity, SWAP_SIMILARITIES),
+                                     ("ae_lr_schedule", self.ae_lr_schedule, AE_LR_SCHEDULES),
+                                     ("ae_sampling", self.ae_sampling, AE_SAMPLINGS)):
+            if value not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+        step = self.autoencoder.time_reduction * self.token_stride
+        if self.edge_frames < 0 or self.edge_frames % step:
+            raise ValueError(f"edge_frames must be a non-negative multiple of {step} (encoder stride x token "
+                             f"stride, so tokens start at the clip's first frame), got {self.edge_frames}")
         if self.frame_multiple % (self.autoencoder.time_reduction * self.token_stride):
             raise ValueError("frame_multiple must be a multiple of time_reduction * token_stride")
 
@@ -143,13 +182,41 @@ def config_from_dict(d: Mapping[str, Any]) -> TGSTConfig:
     return build(TGSTConfig, d)
 
 
+#: fields added after the first checkpoints were written; a stored config without them was trained with the
+#: class defaults (the old behaviour), see :func:`with_stored_defaults`
+ADDED_FIELDS = ("swap_similarity", "edge_frames", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling",
+                "ae_mirror")
+ADDED_TRANSFORMER_FIELDS = ("token_positions",)
+ADDED_AUTOENCODER_FIELDS = ("standardize",)
+
+
+def with_stored_defaults(cfg: TGSTConfig, stored: Mapping[str, Any] | None) -> TGSTConfig:
+    """``cfg`` with every field that ``stored`` (a checkpoint's config dict) predates set to its class default.
+
+    A workdir trained before a field existed keeps the behaviour it was trained with (and resumes), whatever
+    the preset now says for new runs.
+    """
+    if not stored:
+        return cfg
+    top = {f: getattr(TGSTConfig, f) for f in ADDED_FIELDS if f not in stored}
+    for name, cls, added in (("transformer", TransformerConfig, ADDED_TRANSFORMER_FIELDS),
+                             ("autoencoder", AutoencoderConfig, ADDED_AUTOENCODER_FIELDS)):
+        sub_stored = stored.get(name) or {}
+        sub = {f: getattr(cls, f) for f in added if f not in sub_stored}
+        if sub:
+            top[name] = dataclasses.replace(getattr(cfg, name), **sub)
+    return dataclasses.replace(cfg, **top) if top else cfg
+
+
 def get_config(name: str = "paper") -> TGSTConfig:
-    """Named preset: ``"paper"`` (published sizes and training setup) or ``"tiny"`` (fast tests/demo)."""
+    """Named preset: ``"paper"`` (published sizes and training setup), ``"fit"`` (the paper's sizes with an
+    autoencoder recipe that fits real data) or ``"tiny"`` (fast tests/demo)."""
     if name == "paper":
-        return TGSTConfig(name="paper")
+        return TGSTConfig(name="paper", edge_frames=16)
     if name == "tiny":
         return TGSTConfig(
             name="tiny",
+            edge_frames=16,
             ae_learning_rate=1e-3,
             ae_batch_size=4,
             ae_window=64,
@@ -157,4 +224,15 @@ def get_config(name: str = "paper") -> TGSTConfig:
             transformer_batch_size=4,
             transformer_window=128,
         )
-    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper' or 'tiny')")
+    if name == "fit":
+        return TGSTConfig(
+            name="fit",
+            edge_frames=16,
+            transformer=TransformerConfig(token_positions="none"),
+            autoencoder=AutoencoderConfig(standardize=True),
+            ae_learning_rate=1e-3,
+            ae_lr_schedule="cosine",
+            ae_lr_decay_steps=6000,
+            ae_sampling="content",
+        )
+    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit' or 'tiny')")

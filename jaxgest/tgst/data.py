@@ -47,6 +47,7 @@ class BodyData:
       mirrored_upper / mirrored_lower: the same clips mirrored about the sagittal plane.
       names: clip labels (file paths) for error messages.
       fps: the model rate.
+      contents: the content label of each clip (for content-balanced autoencoder windows), or None.
     """
 
     upper: list
@@ -55,6 +56,7 @@ class BodyData:
     mirrored_lower: list
     names: list
     fps: float
+    contents: Optional[list] = None  # content label of each clip (datasets.Clip.content), None if unknown
 
     @property
     def lengths(self) -> np.ndarray:
@@ -71,14 +73,29 @@ def prepare_clips(clips: Sequence, cfg: TGSTConfig) -> BodyData:
     """Dataset clips (``Clip`` or ``Motion``) -> :class:`BodyData` at ``cfg.fps`` with mirrored copies."""
     if not len(clips):
         raise DataError("TGST data: no clips")
-    up, lo, mup, mlo, names = [], [], [], [], []
+    up, lo, mup, mlo, names, contents = [], [], [], [], [], []
     for i, c in enumerate(clips):
         motion = c.motion if isinstance(c, datasets.Clip) else c
         name = str(c.path) if isinstance(c, datasets.Clip) else (motion.name or f"clip {i}")
+        contents.append(c.content if isinstance(c, datasets.Clip) else name)
         u, l = motion_to_arrays(motion, cfg.fps)
         mu, ml = motion_to_arrays(kinematics.mirror(motion), cfg.fps)
         up.append(u), lo.append(l), mup.append(mu), mlo.append(ml), names.append(name)
-    return BodyData(up, lo, mup, mlo, names, float(cfg.fps))
+    return BodyData(up, lo, mup, mlo, names, float(cfg.fps), contents)
+
+
+def channel_stats(data: BodyData, min_std: float = 1e-2) -> dict:
+    """Per-channel mean and std (floored at ``min_std``) of every frame of the original and mirrored clips.
+
+    ``{"upper_mean", "upper_std"}`` (39,) and ``{"lower_mean", "lower_std"}`` (24,) float32: the frozen
+    parameters of a standardising autoencoder (``AutoencoderConfig.standardize``).
+    """
+    out = {}
+    for part in ("upper", "lower"):
+        x = np.concatenate(getattr(data, part) + getattr(data, f"mirrored_{part}"), axis=0).astype(np.float64)
+        out[f"{part}_mean"] = x.mean(0).astype(np.float32)
+        out[f"{part}_std"] = np.maximum(x.std(0), min_std).astype(np.float32)
+    return out
 
 
 def load_body_data(data_dir, cfg: TGSTConfig, progress: bool = False) -> BodyData:
@@ -119,27 +136,47 @@ def _rng(seed: int, stage: int, step: int) -> np.random.Generator:
 def ae_batch(data: BodyData, cfg: TGSTConfig, seed: int, step: int) -> dict:
     """``{"upper": (B, W, 39), "lower": (B, W, 24)}`` float32 windows of original and mirrored clips.
 
-    Uniform over all valid (clip, start) pairs of both sets; B = ``cfg.ae_batch_size``, W = ``cfg.ae_window``.
+    ``cfg.ae_mirror=False`` leaves the mirrored clips out. ``cfg.ae_sampling == "windows"``: uniform over all
+    valid (clip, start) pairs of both sets;
+    ``"content"``: every content label gets the same share of the windows (uniform over the valid windows of
+    its clips), so a few long or numerous contents (Bandai-Namco: 105 of 144 training clips are locomotion)
+    do not drown the others. B = ``cfg.ae_batch_size``, W = ``cfg.ae_window``.
     """
     rng = _rng(seed, AE_STAGE, step)
-    uppers = data.upper + data.mirrored_upper
-    lowers = data.lower + data.mirrored_lower
-    w = sample_windows_idx(np.concatenate([data.lengths, data.lengths]), cfg.ae_window, cfg.ae_batch_size, rng,
-                           data.names + data.names)
+    copies = 2 if cfg.ae_mirror else 1  # ae_mirror=False: the original clips only
+    uppers = (data.upper + data.mirrored_upper)[:copies * len(data.upper)]
+    lowers = (data.lower + data.mirrored_lower)[:copies * len(data.lower)]
+    groups = None
+    if cfg.ae_sampling == "content":
+        groups = list(data.contents or data.names) * copies
+    w = sample_windows_idx(np.concatenate([data.lengths] * copies), cfg.ae_window, cfg.ae_batch_size, rng,
+                           list(data.names) * copies, groups=groups)
     up = np.stack([uppers[i][s:s + cfg.ae_window] for i, s in w])
     lo = np.stack([lowers[i][s:s + cfg.ae_window] for i, s in w])
     return {"upper": up, "lower": lo}
 
 
 def sample_windows_idx(lengths: np.ndarray, length: int, batch: int, rng: np.random.Generator,
-                       names: Sequence[str]) -> list[tuple[int, int]]:
-    """``batch`` (clip, start) pairs uniform over the valid windows (DataError naming the longest clip)."""
+                       names: Sequence[str], groups: Optional[Sequence[str]] = None) -> list[tuple[int, int]]:
+    """``batch`` (clip, start) pairs uniform over the valid windows (DataError naming the longest clip).
+
+    groups: a label per clip; then every label with a valid window gets the same probability, spread
+    uniformly over its valid windows.
+    """
     valid = np.maximum(lengths - length + 1, 0)
     if valid.sum() == 0:
         hi = int(np.argmax(lengths))
         raise DataError(f"no clip is long enough for a {length}-frame window: the longest, {names[hi]}, has "
                         f"{lengths[hi]} frames at the model rate")
-    index = rng.choice(len(lengths), size=batch, p=valid / valid.sum())
+    p = valid / valid.sum()
+    if groups is not None:
+        labels = np.asarray([str(g) for g in groups])
+        p = np.zeros(len(lengths))
+        live = [g for g in dict.fromkeys(labels) if valid[labels == g].sum() > 0]
+        for g in live:
+            m = labels == g
+            p[m] = valid[m] / valid[m].sum() / len(live)
+    index = rng.choice(len(lengths), size=batch, p=p)
     return [(int(i), int(rng.integers(0, valid[i]))) for i in index]
 
 

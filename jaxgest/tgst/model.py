@@ -19,10 +19,14 @@ import jax.numpy as jnp
 from jaxgest.tgst import baselines, losses, swap
 from jaxgest.tgst.autoencoder import MotionAutoencoder
 from jaxgest.tgst.config import TGSTConfig
-from jaxgest.tgst.tokens import detokenize, pad_frames, tokenize, trim_frames
+from jaxgest.tgst.tokens import check_clip_length, detokenize, num_tokens, padded_length, tokenize
 from jaxgest.tgst.transformer import StyleTransformer
 
-METHODS = ("soft", "hard", "adain", "avatarnet")
+#: the four methods compared in the paper (§4.3, Tables 2-3)
+TRANSFER_METHODS = ("soft", "hard", "adain", "avatarnet")
+#: every ``method=`` accepted: the four plus ``"autoencoder"``, the content's plain autoencoder round trip
+#: (no style; a diagnostic and control)
+METHODS = TRANSFER_METHODS + ("autoencoder",)
 Params = dict[str, Any]
 
 
@@ -57,6 +61,61 @@ def decode(ae_params: Params, z: jax.Array, *, cfg: TGSTConfig) -> tuple[jax.Arr
     return upper, lower
 
 
+def edge_layout(frames: int, *, cfg: TGSTConfig) -> tuple[int, int]:
+    """(lead, total) frames of a clip of ``frames`` frames after :func:`pad_clip`.
+
+    lead = ``cfg.edge_frames`` replicated first frames; the end is replicated by at least as many frames and
+    up to a multiple of ``cfg.frame_multiple`` in total.
+    """
+    lead = cfg.edge_frames
+    return lead, padded_length(frames + 2 * lead, cfg.frame_multiple)
+
+
+def pad_clip(x: jax.Array, *, cfg: TGSTConfig) -> jax.Array:
+    """Clip ends (SPEC §3): replicate-pad ``(batch, F, ch)`` at both ends (see :func:`edge_layout`).
+
+    The one place where every encode path (autoencoder training windows, transformer training, transfers,
+    round trips, diagnostics) pads a clip, so the encoder's zero padding only ever meets copies of the edge
+    frames, never real frames. Raises :class:`ClipTooShortError` when ``F < cfg.min_frames``. With
+    ``cfg.edge_frames == 0`` it is the end-only padding of :func:`jaxgest.tgst.tokens.pad_frames`.
+    """
+    chex.assert_rank(x, 3)
+    f = x.shape[1]
+    check_clip_length(f, min_frames=cfg.min_frames)
+    lead, total = edge_layout(f, cfg=cfg)
+    if total == f:
+        return x
+    return jnp.pad(x, ((0, 0), (lead, total - f - lead), (0, 0)), mode="edge")
+
+
+def trim_clip(y: jax.Array, frames: int, *, cfg: TGSTConfig) -> jax.Array:
+    """Inverse of :func:`pad_clip` on decoded frames: the ``frames`` frames after the lead."""
+    return y[:, cfg.edge_frames:cfg.edge_frames + frames]
+
+
+def clip_latent_range(frames: int, *, cfg: TGSTConfig) -> tuple[int, int]:
+    """[start, stop) of the latent frames of :func:`encode_clip` that belong to the real clip."""
+    red = cfg.autoencoder.time_reduction
+    start = cfg.edge_frames // red
+    return start, start + math.ceil(frames / red)
+
+
+def encode_clip(ae_params: Params, upper: jax.Array, *, cfg: TGSTConfig) -> jax.Array:
+    """Upper-body exp-maps ``(batch, F, 39)`` -> latents of the padded clip (:func:`pad_clip`).
+
+    Decode them with :func:`decode` and cut the result with :func:`trim_clip`; the latents of the real
+    frames are :func:`clip_latent_range`.
+    """
+    return encode(ae_params, pad_clip(upper, cfg=cfg), cfg=cfg)
+
+
+def reconstruct(ae_params: Params, upper: jax.Array, *, cfg: TGSTConfig) -> tuple[jax.Array, jax.Array]:
+    """The autoencoder round trip ``(batch, F, 39)`` -> (upper ``(batch, F, 39)``, lower ``(batch, F, 24)``)."""
+    f = upper.shape[1]
+    up, lo = decode(ae_params, encode_clip(ae_params, upper, cfg=cfg), cfg=cfg)
+    return trim_clip(up, f, cfg=cfg), trim_clip(lo, f, cfg=cfg)
+
+
 def transformer_encode(tr_params: Params, tokens: jax.Array, *, cfg: TGSTConfig):
     """T_E: tokens ``(batch, N, d)`` -> (encoded ``(batch, 1 + N, d)``, aux with keys / cls)."""
     return transformer_module(cfg).apply({"params": tr_params}, tokens, method=StyleTransformer.encode)
@@ -74,9 +133,10 @@ def swap_encoded(tr_params: Params, encoded_content: jax.Array, encoded_style: j
     """Decode and swap: eq. 3 then eq. 4 (or eq. 19 when ``hard``); returns (tokens, swap weights)."""
     decoded, _ = transformer_decode(tr_params, encoded_content, encoded_style, cfg=cfg)
     if hard:
-        weights = swap.hard_swap_weights(decoded, encoded_style)
+        weights = swap.hard_swap_weights(decoded, encoded_style, similarity=cfg.swap_similarity)
     else:
-        weights = swap.soft_swap_weights(decoded, encoded_style, cfg.swap_temperature)
+        weights = swap.soft_swap_weights(decoded, encoded_style, cfg.swap_temperature,
+                                         similarity=cfg.swap_similarity)
     return swap.apply_swap(weights, style_tokens), weights
 
 
@@ -124,11 +184,12 @@ def transformer_loss_terms(tr_params: Params, content_tokens: jax.Array, style_t
 
 
 def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array, *, cfg: TGSTConfig,
-                     method: str = "soft", content_valid: int | None = None, style_valid: int | None = None):
+                     method: str = "soft", content_valid=None, style_valid=None):
     """Transfer latents ``(batch, Tc, 16)`` to the style of ``(batch, Ts, 16)``: (``(batch, Tc, 16)``, aux).
 
-    method: ``"soft"`` (eq. 4), ``"hard"`` (eq. 19), ``"adain"`` (eq. 17) or ``"avatarnet"`` (eq. 18).
-    ``*_valid``: latent frames of the real clips (statistics of the baselines ignore the padding).
+    method: ``"soft"`` (eq. 4), ``"hard"`` (eq. 19), ``"adain"`` (eq. 17), ``"avatarnet"`` (eq. 18) or
+    ``"autoencoder"`` (the content latents unchanged). ``*_valid``: the latent frames of the real clips, an
+    int (the first frames) or a static ``(start, stop)`` range; the baselines' statistics ignore the padding.
     """
     w, h = cfg.token_width, cfg.token_stride
     if method in ("soft", "hard"):
@@ -141,33 +202,76 @@ def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array
     if method == "avatarnet":
         return baselines.avatarnet_swap(content_z, style_z, w=w, h=h, content_valid=content_valid,
                                         style_valid=style_valid), {}
+    if method == "autoencoder":
+        return content_z, {}
     raise ValueError(f"unknown transfer method {method!r} (expected one of {METHODS})")
+
+
+def encode_pair(ae_params: Params, content_upper: jax.Array, style_upper: jax.Array, *, cfg: TGSTConfig):
+    """Padded content latents, the style latents that the swap sees, and the real latent ranges of both.
+
+    The content keeps its padded latents (the decoder needs them as context at the clip ends; the output is
+    trimmed); the style is cut to its real frames (edge copies would add frozen style tokens). With
+    ``cfg.edge_frames == 0`` (old runs) both keep their end padding, as before.
+    """
+    fc, fs = content_upper.shape[1], style_upper.shape[1]
+    zc = encode_clip(ae_params, content_upper, cfg=cfg)
+    zs = encode_clip(ae_params, style_upper, cfg=cfg)
+    c_range, s_range = clip_latent_range(fc, cfg=cfg), clip_latent_range(fs, cfg=cfg)
+    if cfg.edge_frames:
+        zs = zs[:, s_range[0]:s_range[1]]
+        s_range = (0, zs.shape[1])
+        check_clip_length(zs.shape[1], min_frames=cfg.token_width, what="style latent clip")
+    return zc, zs, c_range, s_range
+
+
+def _broadcast_style(content_upper, style_upper):
+    chex.assert_rank([content_upper, style_upper], 3)
+    b = content_upper.shape[0]
+    if style_upper.shape[0] == 1 and b != 1:
+        style_upper = jnp.broadcast_to(style_upper, (b,) + style_upper.shape[1:])
+    chex.assert_axis_dimension(style_upper, 0, b)
+    return style_upper
 
 
 def transfer_arrays(params: Params, content_upper: jax.Array, style_upper: jax.Array, *, cfg: TGSTConfig,
                     method: str = "soft"):
     """Full transfer on arrays: content ``(batch, Fc, 39)`` in the style of ``(batch | 1, Fs, 39)``.
 
-    Returns (upper ``(batch, Fc, 39)``, lower ``(batch, Fc, 24)``, aux). Pads both clips to a multiple of
-    16 frames (edge frames), encodes them, tokenizes, transfers (``method``), cross-fades the tokens back,
-    decodes both body halves and trims to Fc. Clips shorter than 16 frames raise ``ClipTooShortError``.
+    Returns (upper ``(batch, Fc, 39)``, lower ``(batch, Fc, 24)``, aux). Pads both clips at both ends with
+    copies of their edge frames (:func:`pad_clip`), encodes them, tokenizes, transfers (``method``),
+    cross-fades the tokens back, decodes both body halves and trims to Fc (:func:`trim_clip`).
+    ``method="autoencoder"`` returns the content's plain round trip (the style is ignored).
+    Clips shorter than 16 frames raise ``ClipTooShortError``.
     Jit with ``static_argnames=("cfg", "method")``.
     References: Kuriyama et al. 2022, Fig. 2.
     """
-    chex.assert_rank([content_upper, style_upper], 3)
+    style_upper = _broadcast_style(content_upper, style_upper)
     b, fc, _ = content_upper.shape
-    fs = style_upper.shape[1]
-    if style_upper.shape[0] == 1 and b != 1:
-        style_upper = jnp.broadcast_to(style_upper, (b,) + style_upper.shape[1:])
-    chex.assert_axis_dimension(style_upper, 0, b)
-    m, red = cfg.frame_multiple, cfg.autoencoder.time_reduction
-    zc = encode(params["autoencoder"], pad_frames(content_upper, m, min_frames=cfg.min_frames), cfg=cfg)
-    zs = encode(params["autoencoder"], pad_frames(style_upper, m, min_frames=cfg.min_frames), cfg=cfg)
+    zc, zs, c_range, s_range = encode_pair(params["autoencoder"], content_upper, style_upper, cfg=cfg)
     zx, aux = transfer_latents(params["transformer"], zc, zs, cfg=cfg, method=method,
-                               content_valid=math.ceil(fc / red), style_valid=math.ceil(fs / red))
+                               content_valid=c_range, style_valid=s_range)
     upper, lower = decode(params["autoencoder"], zx, cfg=cfg)
     aux = dict(aux, content_latents=zc, style_latents=zs, transferred_latents=zx)
-    upper, lower = trim_frames(upper, fc), trim_frames(lower, fc)
+    upper, lower = trim_clip(upper, fc, cfg=cfg), trim_clip(lower, fc, cfg=cfg)
     chex.assert_shape(upper, (b, fc, cfg.autoencoder.upper_channels))
     chex.assert_shape(lower, (b, fc, cfg.autoencoder.lower_channels))
     return upper, lower, aux
+
+
+def swap_weights(params: Params, content_upper: jax.Array, style_upper: jax.Array, *,
+                 cfg: TGSTConfig) -> jax.Array:
+    """Soft-swap weights (eq. 4) of a transfer, ``(batch, Nc, Ns)``, rows on the simplex.
+
+    Row n is content token n of the real clip (token 0 starts at the content's first frame; tokens that
+    cover only edge padding are left out), column m is style token m (token 0 starts at the style's first
+    frame), so "argmax within +-1 of the query's own index" compares like positions. Same inputs as
+    :func:`transfer_arrays`; jit with ``static_argnames="cfg"``.
+    References: Kuriyama et al. 2022, eq. 4.
+    """
+    style_upper = _broadcast_style(content_upper, style_upper)
+    zc, zs, c_range, _ = encode_pair(params["autoencoder"], content_upper, style_upper, cfg=cfg)
+    w, h = cfg.token_width, cfg.token_stride
+    _, aux = transfer_tokens(params["transformer"], tokenize(zc, w, h), tokenize(zs, w, h), cfg=cfg)
+    first = c_range[0] // h
+    return aux["swap_weights"][:, first:first + num_tokens(c_range[1] - c_range[0], w=w, h=h)]

@@ -27,9 +27,9 @@ from flax.training.train_state import TrainState
 
 from jaxgest.tgst.autoencoder import expmap_reconstruction_loss, mean_angular_error_deg
 from jaxgest.tgst.config import TGSTConfig
-from jaxgest.tgst.model import (Params, autoencoder_module, encode, transformer_loss_terms,
+from jaxgest.tgst.model import (Params, autoencoder_module, encode_pair, reconstruct, transformer_loss_terms,
                                 transformer_module)
-from jaxgest.tgst.tokens import pad_frames, tokenize
+from jaxgest.tgst.tokens import tokenize
 
 Step = Callable[[TrainState, dict, jax.Array], tuple[TrainState, dict]]
 
@@ -55,13 +55,19 @@ def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: TGSTConfig) -> dict[st
     """Per-example autoencoder losses ``(batch,)``: ``loss`` over all 21 joints, upper/lower parts, degrees.
 
     batch: ``{"upper": (B, F, 39), "lower": (B, F, 24)}`` with F a multiple of 4 (the encoder's stride).
+    Each window goes through the same clip-end handling as a whole clip at transfer time
+    (:func:`jaxgest.tgst.model.reconstruct`: replicate-padded at both ends, trimmed back); without edge
+    frames (``cfg.edge_frames == 0``, old runs) the window is encoded as it is.
     """
     upper, lower = batch["upper"], batch["lower"]
     chex.assert_rank([upper, lower], 3)
     b, f, _ = upper.shape
     chex.assert_shape(lower, (b, f, cfg.autoencoder.lower_channels))
-    (up_hat, lo_hat), _ = autoencoder_module(cfg).apply({"params": ae_params}, upper)
-    up_hat, lo_hat = up_hat[:, :f], lo_hat[:, :f]
+    if cfg.edge_frames:
+        up_hat, lo_hat = reconstruct(ae_params, upper, cfg=cfg)
+    else:
+        (up_hat, lo_hat), _ = autoencoder_module(cfg).apply({"params": ae_params}, upper)
+        up_hat, lo_hat = up_hat[:, :f], lo_hat[:, :f]
     pred = jnp.concatenate([up_hat, lo_hat], axis=-1)
     target = jnp.concatenate([upper, lower], axis=-1)
     return {
@@ -92,18 +98,16 @@ def make_transformer_train_step(cfg: TGSTConfig, tx: optax.GradientTransformatio
     """Adam step on eq. 12 with the autoencoder ``ae_params`` frozen (closed over).
 
     batch: ``{"content": (B, Fc, 39), "style": (B, Fs, 39)}`` upper-body exp-maps of unaligned clips (any
-    lengths >= 16 frames; padded to a multiple of 16 here). Metrics: ``loss``, ``identity``, ``cyclic``,
+    lengths >= 16 frames; encoded like :func:`jaxgest.tgst.model.transfer_arrays` encodes them: the content
+    with its edge padding, the style cut to its real frames). Metrics: ``loss``, ``identity``, ``cyclic``,
     ``structure``, ``appearance`` (batch means; switched-off terms are 0).
     """
     ae_params = jax.tree_util.tree_map(jnp.asarray, ae_params)
-    w, h, m = cfg.token_width, cfg.token_stride, cfg.frame_multiple
-
-    def tokens_of(upper):
-        z = encode(ae_params, pad_frames(upper, m, min_frames=cfg.min_frames), cfg=cfg)
-        return jax.lax.stop_gradient(tokenize(z, w, h))
+    w, h = cfg.token_width, cfg.token_stride
 
     def loss_fn(params, batch):
-        content, style = tokens_of(batch["content"]), tokens_of(batch["style"])
+        zc, zs, _, _ = encode_pair(ae_params, batch["content"], batch["style"], cfg=cfg)
+        content, style = (jax.lax.stop_gradient(tokenize(z, w, h)) for z in (zc, zs))
         terms = transformer_loss_terms(params, content, style, cfg=cfg)
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
         return metrics["loss"], metrics

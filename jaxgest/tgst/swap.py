@@ -1,7 +1,8 @@
 """Token swapping: the soft swapper of eq. 4 and its hard (argmax) ablation, eq. 19.
 
-The similarity is the plain dot product (no 1/sqrt(d) scaling) between decoded content tokens and the
-encoded style tokens; the blend is applied to the *raw* style tokens g^s (not the encoded ones), so every
+The similarity is the plain dot product (no 1/sqrt(d) scaling, eq. 4) between decoded content tokens and
+the encoded style tokens, or optionally (``similarity="scaled"``) the dot product of LayerNorm-ed tokens
+divided by sqrt(d); the blend is applied to the *raw* style tokens g^s (not the encoded ones), so every
 output token is a convex combination of style tokens.
 
 References: Kuriyama et al. 2022, §3.4, eq. 4; §4.3, eq. 19.
@@ -14,32 +15,50 @@ import jax
 import jax.numpy as jnp
 
 
-def swap_logits(decoded_content: jax.Array, encoded_style: jax.Array) -> jax.Array:
-    """Dot products ``(batch, Nc, Ns)`` of decoded content ``(batch, Nc, d)`` and encoded style tokens.
+SIMILARITIES = ("dot", "scaled")
+
+
+def _standardize(x: jax.Array, eps: float = 1e-5) -> jax.Array:
+    """LayerNorm without parameters over the last axis."""
+    mu = jnp.mean(x, axis=-1, keepdims=True)
+    var = jnp.var(x, axis=-1, keepdims=True)
+    return (x - mu) * jax.lax.rsqrt(var + eps)
+
+
+def swap_logits(decoded_content: jax.Array, encoded_style: jax.Array, similarity: str = "dot") -> jax.Array:
+    """Similarities ``(batch, Nc, Ns)`` of decoded content ``(batch, Nc, d)`` and encoded style tokens.
 
     encoded_style is the encoder output ``(batch, 1 + Ns, d)`` with CLS first; the CLS row is excluded.
+    similarity: ``"dot"`` -- the plain dot product of eq. 4; ``"scaled"`` -- both sides normalised like a
+    LayerNorm without parameters and divided by sqrt(d) (a cosine-like score in [-sqrt(d), sqrt(d)], so the
+    softmax cannot become one-hot from growing token norms alone).
     """
     chex.assert_rank([decoded_content, encoded_style], 3)
     chex.assert_axis_dimension(encoded_style, 2, decoded_content.shape[-1])
-    return jnp.einsum("bnd,bmd->bnm", decoded_content, encoded_style[:, 1:])
+    c, s = decoded_content, encoded_style[:, 1:]
+    if similarity == "scaled":
+        c, s = _standardize(c) / jnp.sqrt(c.shape[-1]).astype(c.dtype), _standardize(s)
+    elif similarity != "dot":
+        raise ValueError(f"unknown swap similarity {similarity!r} (expected one of {SIMILARITIES})")
+    return jnp.einsum("bnd,bmd->bnm", c, s)
 
 
 def soft_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array,
-                      temperature: float = 1.0) -> jax.Array:
+                      temperature: float = 1.0, similarity: str = "dot") -> jax.Array:
     """W = softmax_m(g~c_n . T_E(g^s)_m / temperature) over style tokens (CLS excluded); ``(batch, Nc, Ns)``.
 
     temperature = 1 is eq. 4; temperature -> 0 tends to the hard swap of eq. 19.
     References: Kuriyama et al. 2022, eq. 4.
     """
-    return jax.nn.softmax(swap_logits(decoded_content, encoded_style) / temperature, axis=-1)
+    return jax.nn.softmax(swap_logits(decoded_content, encoded_style, similarity) / temperature, axis=-1)
 
 
-def hard_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array) -> jax.Array:
+def hard_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, similarity: str = "dot") -> jax.Array:
     """One-hot argmax over style tokens of the same similarities; ``(batch, Nc, Ns)``.
 
     References: Kuriyama et al. 2022, eq. 19.
     """
-    logits = swap_logits(decoded_content, encoded_style)
+    logits = swap_logits(decoded_content, encoded_style, similarity)
     return jax.nn.one_hot(jnp.argmax(logits, axis=-1), logits.shape[-1], dtype=logits.dtype)
 
 

@@ -34,12 +34,13 @@ from jaxgest import parallel, training
 from jaxgest.errors import DataError, JaxgestError
 from jaxgest.motion.synthetic.dataset import training_folder
 from jaxgest.tgst import data as tdata
-from jaxgest.tgst.config import TGSTConfig, get_config
+from jaxgest.tgst.config import (ADDED_AUTOENCODER_FIELDS, ADDED_FIELDS, ADDED_TRANSFORMER_FIELDS, AutoencoderConfig,
+                                 TGSTConfig, TransformerConfig, get_config, with_stored_defaults)
 from jaxgest.tgst.model import init_params
 from jaxgest.tgst.steps import (create_ae_state, create_transformer_state, make_ae_train_step,
                                 make_transformer_train_step)
 
-DEFAULT_STEPS = {"tiny": (200, 200), "paper": (10_000, 10_000)}
+DEFAULT_STEPS = {"tiny": (200, 200), "paper": (10_000, 10_000), "fit": (6_000, 10_000)}
 AE_KIND, TRANSFORMER_KIND = "tgst_autoencoder", "tgst_transformer"
 AE_SUBDIR, TRANSFORMER_SUBDIR = "checkpoints/autoencoder", "checkpoints/transformer"
 PRESETS = tuple(DEFAULT_STEPS)
@@ -55,7 +56,7 @@ LOSS_TERMS = ("identity", "cyclic", "structure", "appearance")
 #: config keys the autoencoder does not depend on: a stage-1 checkpoint can be shared by runs that differ only
 #: in them (the loss ablations of Table 4 reuse one autoencoder)
 AE_IGNORED = ("steps", "name", "transformer", "transformer_learning_rate", "transformer_batch_size",
-              "transformer_window", "swap_temperature") + tuple(f"use_{t}" for t in LOSS_TERMS) + tuple(
+              "transformer_window", "swap_temperature", "swap_similarity") + tuple(f"use_{t}" for t in LOSS_TERMS) + tuple(
               f"lambda_{t}" for t in LOSS_TERMS)
 
 
@@ -70,18 +71,58 @@ def apply_ablation(cfg: TGSTConfig, ablate=()) -> TGSTConfig:
     return dataclasses.replace(cfg, **{f"use_{a}": False for a in ablate})
 
 
+def apply_overrides(cfg: TGSTConfig, overrides: Optional[dict] = None) -> TGSTConfig:
+    """``cfg`` with fields replaced: ``{"swap_similarity": "scaled", "transformer.token_positions": "none"}``
+    (``autoencoder.`` / ``transformer.`` prefixes reach the sub-configs); for experiments and ablations."""
+    top, subs = {}, {"autoencoder": {}, "transformer": {}}
+    for key, value in (overrides or {}).items():
+        head, _, rest = key.partition(".")
+        if rest and head in subs:
+            subs[head][rest] = value
+        else:
+            top[key] = value
+    for name, fields in subs.items():
+        if fields:
+            top[name] = dataclasses.replace(getattr(cfg, name), **fields)
+    try:
+        return dataclasses.replace(cfg, **top)
+    except (TypeError, ValueError) as e:
+        raise JaxgestError(f"bad TGST config override: {e}") from None
+
+
+def _legacy_compatible(ckpt: training.Checkpointer) -> training.Checkpointer:
+    """Let a checkpoint written before some config fields existed match a config that has them at their class
+    defaults (the old behaviour, see :func:`jaxgest.tgst.config.with_stored_defaults`): such fields are left
+    out of the requested config when the stored one lacks them. Any other value still is a mismatch."""
+    if not ckpt.directory.is_dir() or ckpt.latest_step() is None:
+        return ckpt
+    stored = (ckpt.stored_meta() or {}).get("config") or {}
+    req = ckpt.meta["config"]
+    for name in ADDED_FIELDS:
+        if name not in stored and name in req and req[name] == getattr(TGSTConfig, name):
+            del req[name]
+    for sub, cls, added in (("autoencoder", AutoencoderConfig, ADDED_AUTOENCODER_FIELDS),
+                            ("transformer", TransformerConfig, ADDED_TRANSFORMER_FIELDS)):
+        if isinstance(req.get(sub), dict) and isinstance(stored.get(sub), dict):
+            for name in added:
+                if name not in stored[sub] and req[sub].get(name, object()) == getattr(cls, name):
+                    del req[sub][name]
+    return ckpt
+
+
 def ae_checkpointer(workdir, cfg: TGSTConfig, read_only: bool = False) -> training.Checkpointer:
-    return training.Checkpointer(workdir, kind=AE_KIND, config=dataclasses.asdict(cfg),
-                                 skeleton=tdata.BODY_SIGNATURE, subdir=AE_SUBDIR, read_only=read_only,
-                                 ignore=AE_IGNORED)
+    return _legacy_compatible(training.Checkpointer(
+        workdir, kind=AE_KIND, config=dataclasses.asdict(cfg), skeleton=tdata.BODY_SIGNATURE, subdir=AE_SUBDIR,
+        read_only=read_only, ignore=AE_IGNORED))
 
 
 def transformer_checkpointer(workdir, cfg: TGSTConfig, ae_step: Optional[int],
                              read_only: bool = False) -> training.Checkpointer:
     config = dict(dataclasses.asdict(cfg), autoencoder_step=ae_step)
     ignore = ("steps",) if ae_step is not None else ("steps", "autoencoder_step")
-    return training.Checkpointer(workdir, kind=TRANSFORMER_KIND, config=config, skeleton=tdata.BODY_SIGNATURE,
-                                 subdir=TRANSFORMER_SUBDIR, read_only=read_only, ignore=ignore)
+    return _legacy_compatible(training.Checkpointer(
+        workdir, kind=TRANSFORMER_KIND, config=config, skeleton=tdata.BODY_SIGNATURE, subdir=TRANSFORMER_SUBDIR,
+        read_only=read_only, ignore=ignore))
 
 
 @functools.lru_cache(maxsize=None)
@@ -95,8 +136,19 @@ def compiled_ae_step(cfg: TGSTConfig, mesh):
 
     Memoised so several trainings in one process (resume, tests) compile each step once.
     """
-    tx = optax.adam(cfg.ae_learning_rate)
+    tx = optax.adam(ae_learning_rate(cfg))
     return parallel.parallelize_step(make_ae_train_step(cfg, tx), mesh), tx
+
+
+def ae_learning_rate(cfg: TGSTConfig):
+    """The autoencoder's learning rate: ``cfg.ae_learning_rate`` (constant, §3.5) or, with
+    ``ae_lr_schedule="cosine"``, a linear warm-up over the first 5 % of ``ae_lr_decay_steps`` to it and a
+    cosine decay to 10 % of it at ``ae_lr_decay_steps`` (constant after)."""
+    if cfg.ae_lr_schedule == "constant":
+        return cfg.ae_learning_rate
+    n = max(int(cfg.ae_lr_decay_steps), 2)
+    return optax.warmup_cosine_decay_schedule(0.0, cfg.ae_learning_rate, warmup_steps=max(1, n // 20),
+                                              decay_steps=n, end_value=0.1 * cfg.ae_learning_rate)
 
 
 @functools.lru_cache(maxsize=8)
@@ -137,7 +189,8 @@ def _check_batch(batch_size: int, mesh, what: str) -> None:
 
 def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = None,
           transformer_steps: Optional[int] = None, seed: int = 0, devices: Optional[int] = None,
-          progress: bool = True, log_every: int = 50, ckpt_every: int = 500, ablate=()) -> dict:
+          progress: bool = True, log_every: int = 50, ckpt_every: int = 500, ablate=(),
+          overrides: Optional[dict] = None) -> dict:
     """Train (or resume) both TGST stages on ``data_dir`` (None: the built-in synthetic data, written to
     ``workdir/synthetic-data``) into ``workdir``; returns a summary dict.
 
@@ -146,7 +199,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     """
     t0 = time.perf_counter()
     parallel.maybe_initialize_distributed()
-    cfg0 = apply_ablation(resolve_preset(preset), ablate)
+    cfg0 = apply_ablation(apply_overrides(resolve_preset(preset), overrides), ablate)
     d_ae, d_tr = DEFAULT_STEPS[preset]
     ae_steps = d_ae if ae_steps is None else int(ae_steps)
     transformer_steps = d_tr if transformer_steps is None else int(transformer_steps)
@@ -161,6 +214,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
 
     body_data = tdata.load_body_data(data_dir, cfg0, progress=progress)
     cfg = tdata.fit_windows(cfg0, body_data)
+    cfg = with_stored_defaults(cfg, _stored_config(workdir, cfg))  # a workdir of an older version
     _check_batch(cfg.ae_batch_size, mesh, "autoencoder")
     _check_batch(cfg.transformer_batch_size, mesh, "transformer")
     workdir.mkdir(parents=True, exist_ok=True)
@@ -178,6 +232,10 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
 
     key = jax.random.PRNGKey(seed)
     params0 = _jitted_init()(cfg=cfg, key=key)
+    if cfg.autoencoder.standardize:  # frozen data statistics (a restored checkpoint brings its own)
+        stats = tdata.channel_stats(body_data)
+        params0 = dict(params0, autoencoder=dict(params0["autoencoder"], **{k: jnp.asarray(v)
+                                                                           for k, v in stats.items()}))
     summary = {"workdir": str(workdir), "preset": preset, "devices": info["devices"],
                "windows": {"ae": cfg.ae_window, "transformer": cfg.transformer_window}}
 
@@ -211,6 +269,18 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     tr_ckpt.close()
     summary["wall_s"] = time.perf_counter() - t0
     return summary
+
+
+def _stored_config(workdir, cfg: TGSTConfig) -> Optional[dict]:
+    """The config dict stored with the latest autoencoder checkpoint of ``workdir`` (None without one)."""
+    if not (pathlib.Path(workdir) / AE_SUBDIR).is_dir():
+        return None
+    probe = ae_checkpointer(workdir, cfg, read_only=True)
+    try:
+        stored = probe.stored_meta()
+        return None if stored is None else stored.get("config")
+    finally:
+        probe.close()
 
 
 def _stored_transformer_meta(workdir, cfg: TGSTConfig, check: bool = False) -> Optional[dict]:

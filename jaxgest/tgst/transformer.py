@@ -5,7 +5,9 @@ are one block with a single head of width d_g = 64 (q/k/v/out 64x64, MLP 64 -> G
 
 ``variant="paper"`` (default, the paper's text): pre-LN ("layer normalization as a preprocessing step",
 §3.4), sinusoidal positions over the combined index (CLS at position 0), band |i - j| <= omega between
-gesture tokens while CLS attends to and is attended by every token.
+gesture tokens while CLS attends to and is attended by every token. ``token_positions="none"`` leaves the
+positions out: the tokens then carry no index, as in the authors' code (whose table is added along the
+batch axis), and the soft swap cannot match content and style tokens by their index.
 
 ``variant="authors"`` (the public PyTorch code, for comparison): LN(x + pe) -> attention ->
 LN(z + attention) -> + MLP (one LN shared by both residuals, or two with ``layernorms_per_block=2``); the
@@ -166,7 +168,8 @@ class StyleTransformerEncoder(nn.Module):
         cls = self.param("cls", nn.initializers.normal(stddev=1.0), (d,))
         x = jnp.concatenate([jnp.broadcast_to(cls.astype(tokens.dtype), (bsz, 1, d)), tokens], axis=1)
         if cfg.variant == "paper":
-            x = x + jnp.asarray(sinusoidal_positions(n + 1, d))[None]
+            if cfg.token_positions == "index":
+                x = x + jnp.asarray(sinusoidal_positions(n + 1, d))[None]
         else:
             if bsz > cfg.max_authors_pe:
                 raise ValueError(f"authors' variant adds positions along the batch axis: batch {bsz} > "

@@ -131,13 +131,29 @@ def decoder(p: dict, enc_c: np.ndarray, enc_s: np.ndarray) -> np.ndarray:
     return x + mlp(p["mlp"], layer_norm(x, p["ln"]))
 
 
-def transfer(params: dict, content: np.ndarray, style: np.ndarray, *, omega: int = 20, hard: bool = False):
-    """Content ``(B, Fc, 39)`` in the style of ``(B, Fs, 39)`` -> (upper ``(B, Fc, 39)``, lower ``(B, Fc, 24)``)."""
+def pad_clip(x: np.ndarray, edge: int) -> np.ndarray:
+    """Clip ends (SPEC §3): ``edge`` copies of the first frame before the clip, copies of the last frame after
+    it (at least ``edge``) up to a multiple of 16 frames in total."""
+    f = x.shape[1]
+    total = -(-(f + 2 * edge) // 16) * 16
+    return np.pad(x, ((0, 0), (edge, total - f - edge), (0, 0)), mode="edge")
+
+
+def transfer(params: dict, content: np.ndarray, style: np.ndarray, *, omega: int = 20, hard: bool = False,
+             edge: int = 16):
+    """Content ``(B, Fc, 39)`` in the style of ``(B, Fs, 39)`` -> (upper ``(B, Fc, 39)``, lower ``(B, Fc, 24)``).
+
+    Both clips are edge-padded at both ends by ``edge`` frames (the presets' ``edge_frames``); the content
+    keeps its padded latents and the output is trimmed, the style is cut to its real latent frames (4x time
+    reduction) before tokenizing."""
     params = _np_tree(params)
     ae, tr = params["autoencoder"], params["transformer"]
     b, fc, _ = content.shape
-    pad = lambda x: np.pad(x, ((0, 0), (0, -(-x.shape[1] // 16) * 16 - x.shape[1]), (0, 0)), mode="edge")  # noqa
-    zc, zs = encode(ae, pad(np.asarray(content, np.float64))), encode(ae, pad(np.asarray(style, np.float64)))
+    fs = style.shape[1]
+    zc = encode(ae, pad_clip(np.asarray(content, np.float64), edge))
+    zs = encode(ae, pad_clip(np.asarray(style, np.float64), edge))
+    if edge:
+        zs = zs[:, edge // 4:edge // 4 + -(-fs // 4)]
     gc, gs = tokenize(zc), tokenize(zs)
     enc_c, enc_s = encoder(tr["encoder"], gc, omega), encoder(tr["encoder"], gs, omega)
     dec = decoder(tr["decoder"], enc_c, enc_s)
@@ -147,7 +163,7 @@ def transfer(params: dict, content: np.ndarray, style: np.ndarray, *, omega: int
     else:
         w = softmax(logits)
     zx = detokenize(w @ gs, zc.shape[1])
-    return decode(ae["upper_decoder"], zx)[:, :fc], decode(ae["lower_decoder"], zx)[:, :fc]
+    return (decode(ae["upper_decoder"], zx)[:, edge:edge + fc], decode(ae["lower_decoder"], zx)[:, edge:edge + fc])
 
 
 def _np_tree(tree):

@@ -59,7 +59,12 @@ def build_styled(root, steps: int = STEPS):
             clips[c, s] = bvh.load(data / f"{stem}.bvh")
     (data / "manifest.csv").write_text("\n".join(rows) + "\n")
     work = root / "work"
-    train(data, work, preset="tiny", steps=steps, progress=False, log_every=steps)
+    # The paper's style sampling (the style window contains the target): with the default `disjoint` sampling
+    # this 4-clip tiny model's style effect at 1,200 steps is ~0.8 cm of the 6.7 cm real lean gap (measured,
+    # experiments/zeggs_synthetic/README.md discusses the weak style contrasts); these tests check that the
+    # generator follows the embedding, blends and PCA edits in the right direction, on a model where it does.
+    train(data, work, preset="tiny", steps=steps, progress=False, log_every=steps,
+          overrides={"style_sampling": "overlap"})
     model = load_model(work)
     audio = data / f"{CONTENTS[0]}_{STYLES[0]}_0.wav"
     examples = [clips[CONTENTS[1], s] for s in STYLES]  # style examples of the other content

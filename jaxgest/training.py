@@ -46,6 +46,7 @@ from jaxgest.io import write_error, write_text_atomic
 
 __all__ = [
     "TrainState",
+    "make_update_step",
     "Checkpointer",
     "MetricsLogger",
     "train_loop",
@@ -56,6 +57,28 @@ __all__ = [
     "strict_checkpoints",
     "warn",
 ]
+
+
+LossFn = Callable[[Any, Any, jax.Array, jax.Array], tuple[jax.Array, Mapping[str, jax.Array]]]
+
+
+def make_update_step(loss_fn: LossFn, *, fold_in_step: bool = False):
+    """The one optimiser step every model trains with: ``step(state, batch, key) -> (state, metrics)``.
+
+    ``loss_fn(params, batch, key, step) -> (loss, metrics)`` is differentiated with respect to ``params``
+    and the state's own optimiser (``state.tx``) applies the gradients (``TrainState.apply_gradients``:
+    ``step + 1``, new params and optimiser state). With ``fold_in_step`` the key is first folded with the
+    step count, so a stochastic loss (dropout, sampling) draws fresh noise every step from one run key.
+    The returned function is pure; :func:`jaxgest.parallel.parallelize_step` jits it with the state donated.
+    """
+
+    def step(state: TrainState, batch, key: jax.Array):
+        if fold_in_step:
+            key = jax.random.fold_in(key, state.step)
+        grads, metrics = jax.grad(loss_fn, has_aux=True)(state.params, batch, key, state.step)
+        return state.apply_gradients(grads=grads), metrics
+
+    return step
 
 
 def write_json_atomic(path, obj) -> None:

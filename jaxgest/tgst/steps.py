@@ -30,6 +30,7 @@ from jaxgest.tgst.config import TGSTConfig
 from jaxgest.tgst.model import (Params, autoencoder_module, encode_pair, reconstruct, transformer_loss_terms,
                                 transformer_module)
 from jaxgest.tgst.tokens import tokenize
+from jaxgest.training import make_update_step
 
 Step = Callable[[TrainState, dict, jax.Array], tuple[TrainState, dict]]
 
@@ -43,12 +44,6 @@ def create_transformer_state(cfg: TGSTConfig, tr_params: Params,
                              tx: optax.GradientTransformation) -> TrainState:
     """TrainState of the style transformer (``apply_fn`` = ``StyleTransformer.apply``)."""
     return TrainState.create(apply_fn=transformer_module(cfg).apply, params=tr_params, tx=tx)
-
-
-def _update(state: TrainState, tx: optax.GradientTransformation, grads) -> TrainState:
-    updates, opt_state = tx.update(grads, state.opt_state, state.params)
-    return state.replace(step=state.step + 1, params=optax.apply_updates(state.params, updates),
-                         opt_state=opt_state)
 
 
 def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: TGSTConfig) -> dict[str, jax.Array]:
@@ -81,17 +76,15 @@ def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: TGSTConfig) -> dict[st
 def make_ae_train_step(cfg: TGSTConfig, tx: optax.GradientTransformation) -> Step:
     """Adam step on the mean exp-map reconstruction loss (§3.5); batch ``{"upper", "lower"}``."""
 
-    def loss_fn(params, batch):
+    del tx  # the state's own optimiser applies the update
+
+    def loss_fn(params, batch, key, step):
+        del key, step  # deterministic model (no dropout), constant loss weights
         terms = ae_loss_terms(params, batch, cfg=cfg)
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
         return metrics["loss"], metrics
 
-    def step(state: TrainState, batch: dict, key: jax.Array):
-        del key  # deterministic model (no dropout)
-        grads, metrics = jax.grad(loss_fn, has_aux=True)(state.params, batch)
-        return _update(state, tx, grads), metrics
-
-    return step
+    return make_update_step(loss_fn)
 
 
 def make_transformer_train_step(cfg: TGSTConfig, tx: optax.GradientTransformation, ae_params: Params) -> Step:
@@ -105,16 +98,14 @@ def make_transformer_train_step(cfg: TGSTConfig, tx: optax.GradientTransformatio
     ae_params = jax.tree_util.tree_map(jnp.asarray, ae_params)
     w, h = cfg.token_width, cfg.token_stride
 
-    def loss_fn(params, batch):
+    del tx  # the state's own optimiser applies the update
+
+    def loss_fn(params, batch, key, step):
+        del key, step  # deterministic model (no dropout), constant loss weights
         zc, zs, _, _ = encode_pair(ae_params, batch["content"], batch["style"], cfg=cfg)
         content, style = (jax.lax.stop_gradient(tokenize(z, w, h)) for z in (zc, zs))
         terms = transformer_loss_terms(params, content, style, cfg=cfg)
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
         return metrics["loss"], metrics
 
-    def step(state: TrainState, batch: dict, key: jax.Array):
-        del key  # deterministic model (no dropout)
-        grads, metrics = jax.grad(loss_fn, has_aux=True)(state.params, batch)
-        return _update(state, tx, grads), metrics
-
-    return step
+    return make_update_step(loss_fn)

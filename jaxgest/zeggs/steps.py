@@ -40,6 +40,7 @@ from jaxgest.zeggs import losses as L
 from jaxgest.zeggs.config import ZeggsConfig
 from jaxgest.zeggs.generator import Generator, input_scale
 from jaxgest.zeggs.speech_encoder import SpeechEncoder
+from jaxgest.training import make_update_step
 from jaxgest.zeggs.style_encoder import StyleEncoder, sample_style
 
 Step = Callable[[TrainState, dict, jax.Array], tuple[TrainState, dict]]
@@ -180,12 +181,5 @@ def make_train_step(cfg: ZeggsConfig, tx: optax.GradientTransformation, *, pose_
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
         return metrics["loss"], metrics
 
-    def step(state: TrainState, batch: dict, key: jax.Array):
-        key = jax.random.fold_in(key, state.step)
-        grads, metrics = jax.grad(loss_fn, has_aux=True)(state.params, batch, key, state.step)
-        updates, opt_state = tx.update(grads, state.opt_state, state.params)
-        state = state.replace(step=state.step + 1, params=optax.apply_updates(state.params, updates),
-                              opt_state=opt_state)
-        return state, metrics
-
-    return step
+    del tx  # the state's own optimiser applies the update
+    return make_update_step(loss_fn, fold_in_step=True)

@@ -266,17 +266,19 @@ def replicate(tree: Any, mesh: Mesh) -> Any:
     return jax.tree_util.tree_map(put, tree)
 
 
-def parallelize_step(step_fn: Callable, mesh: Mesh, donate: bool = True) -> Callable:
-    """Compile ``step_fn(state, batch, key) -> (state, metrics)`` data-parallel over ``mesh``.
+def parallelize_step(step_fn: Callable, mesh: Mesh, donate: bool = True, *, extra_args: int = 0,
+                     compiler_options: Optional[dict] = None) -> Callable:
+    """Compile ``step_fn(state, batch, key, *extra) -> (state, metrics)`` data-parallel over ``mesh``.
 
-    ``jax.jit`` with the state and key replicated, the batch split over ``"data"``, the new state and the
-    metrics replicated, and the state donated (its buffers are reused; do not touch the old state).
+    ``jax.jit`` with the state, key and ``extra_args`` further arguments (e.g. dataset statistics)
+    replicated, the batch split over ``"data"``, the new state and the metrics replicated, and the state
+    donated (its buffers are reused; do not touch the old state); ``compiler_options`` go to ``jax.jit``.
     ``step_fn`` is the plain step: means over the batch inside it are global means (XLA adds the
     cross-device reduction), so it is written exactly as for one device.
     """
     rep, data = replicated(mesh), data_sharding(mesh)
-    return jax.jit(step_fn, in_shardings=(rep, data, rep), out_shardings=(rep, rep),
-                   donate_argnums=(0,) if donate else ())
+    return jax.jit(step_fn, in_shardings=(rep, data, rep) + (rep,) * extra_args, out_shardings=(rep, rep),
+                   donate_argnums=(0,) if donate else (), compiler_options=compiler_options)
 
 
 def device_info(mesh: Mesh) -> dict:

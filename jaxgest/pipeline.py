@@ -7,8 +7,8 @@ for speech-driven gesture generation; :func:`speech_to_styled_gestures` is that 
    ``zeggs_style`` (a neutral reference clip, or any clip; default: the style exemplar itself);
 2. TGST (:mod:`jaxgest.tgst.api`) transfers that motion to the style of the exemplar ``style``
    (content = the generated motion, whose timing follows the speech);
-3. the result is put on the exemplar's skeleton through the joint maps (retargeting through the T-poses,
-   :mod:`jaxgest.motion.body`) with the feet on the floor, and has ``round(duration x fps)`` frames at the
+3. the result is put on the exemplar's skeleton (:func:`jaxgest.motion.retarget.to_rig`: through the joint
+   maps with the feet on the floor when the rigs differ) and has ``round(duration x fps)`` frames at the
    exemplar's frame rate.
 
 References: Kuriyama et al. 2022, §5 (future work); Ghorbani et al. 2023, §3.
@@ -20,23 +20,9 @@ import pathlib
 import time
 from typing import Optional
 
-
 from jaxgest.errors import DataError
-from jaxgest.motion import body, kinematics
-from jaxgest.motion.datasets import fit_frames, resample_motion
+from jaxgest.motion.retarget import to_rig
 from jaxgest.motion.skeleton import Motion
-
-
-def to_rig(motion: Motion, template: Motion, frames: Optional[int] = None) -> Motion:
-    """``motion`` on ``template``'s skeleton and frame rate, feet on the floor, cut/padded to ``frames``."""
-    if motion.skeleton.names != template.skeleton.names:
-        first = template.replace(rotations=template.rotations[:1], translations=template.translations[:1])
-        moved = body.retarget_from_body(body.retarget_to_body(motion), first)
-        motion = kinematics.floor_contact(moved).replace(name=motion.name)
-    motion = resample_motion(motion, template.fps)
-    if frames is not None and frames != motion.num_frames:
-        motion = fit_frames(motion, frames)  # at most a frame or two of rounding
-    return motion
 
 
 def audio_duration(audio, sr: Optional[int] = None) -> float:
@@ -72,6 +58,6 @@ def speech_to_styled_gestures(audio, style: Motion, *, zeggs_workdir, tgst_workd
                                temperature=temperature, sr=sr, name="zeggs")
     t2 = time.perf_counter()
     styled = tgst.transfer(generated, style, method=method, name=f"speech in the style of {style.name or 'style'}")
-    styled = to_rig(styled, style, frames=max(1, int(round(audio_duration(audio, sr) * style.fps))))
+    styled = to_rig(styled, style, fps=style.fps, frames=max(1, int(round(audio_duration(audio, sr) * style.fps))))
     t3 = time.perf_counter()
     return styled, generated, {"load_s": t1 - t0, "zeggs_s": t2 - t1, "tgst_s": t3 - t2}

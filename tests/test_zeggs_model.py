@@ -13,17 +13,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from flax.training.train_state import TrainState
+
 from jaxgest.errors import JaxgestError
 from jaxgest.motion import rotations as R
-from jaxgest.zeggs import features as Fe
-from jaxgest.zeggs import losses as L
-from jaxgest.zeggs import steps as S
+from jaxgest.zeggs import features, losses, steps
 from jaxgest.zeggs.api import count_params
-from jaxgest.zeggs.config import config_from_dict, get_config
+from jaxgest.zeggs.config import LEGACY_DEFAULTS, Config, preset
 from jaxgest.zeggs.generator import generate_loop_reference, update_character_state
+from jaxgest.zeggs.model import ZeggsModel, init_params
 from jaxgest.zeggs.style_encoder import StyleEncoder, sample_style
 
-CFG = get_config("tiny")
+TINY = preset("tiny")
+CFG = TINY.model
 P = CFG.pose_dim
 
 
@@ -48,16 +50,44 @@ def _batch(B=2, T=8, S_=12, seed=0):
 
 @pytest.fixture(scope="module")
 def params():
-    return S.init_params(CFG, jax.random.PRNGKey(0))
+    return init_params(CFG, jax.random.key(0))
 
 
 def test_config_json_round_trip():
-    for name in ("tiny", "paper"):
-        cfg = get_config(name)
-        assert config_from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
-    assert get_config("paper").pose_dim == 15 * 75 + 6
+    for name in ("tiny", "small", "paper"):
+        cfg = preset(name)
+        assert Config.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
+    assert preset("paper").model.pose_dim == 15 * 75 + 6
     with pytest.raises(ValueError):
-        get_config("huge")
+        preset("huge")
+    with pytest.raises(ValueError, match="gru"):
+        Config.from_dict({**preset("tiny").to_dict(), "model": {"gru": 3}})
+
+
+def test_config_parts_hold_their_fields():
+    """Model / train / inference fields are disjoint; overrides by bare name reach the right part."""
+    c = preset("tiny").override(gru_hidden=16, learning_rate=3e-4, temperature=0.5)
+    assert (c.model.gru_hidden, c.train.learning_rate, c.inference.temperature) == (16, 3e-4, 0.5)
+    assert c.train == preset("tiny").train.replace(learning_rate=3e-4)
+    parts = [set(Config().model.to_dict()), set(Config().train.to_dict()), set(Config().inference.to_dict())]
+    assert not parts[0] & parts[1] and not parts[0] & parts[2]
+    assert parts[1] & parts[2] == {"xla_opt_level"}  # the same XLA setting for training and inference
+
+
+def test_flat_config_of_earlier_versions_maps_to_the_parts():
+    """config.json of earlier versions held one flat dict: it is split by field, and a field those versions
+    did not have yet (LEGACY_DEFAULTS) takes the old behaviour."""
+    cfg = preset("small")
+    flat = {**cfg.model.to_dict(), **cfg.train.to_dict(), **cfg.inference.to_dict(), "name": "small"}
+    flat.pop("steps")  # the old flat config had no steps field
+    flat = json.loads(json.dumps(flat))
+    assert Config.from_dict(flat) == cfg.override(steps=Config().train.steps)
+    old = {k: v for k, v in flat.items() if k not in LEGACY_DEFAULTS}
+    restored = Config.from_dict(old)
+    assert restored.model.loudness is False and restored.model.input_norm == "channel"
+    assert restored.model.replace(**{k: getattr(cfg.model, k) for k in LEGACY_DEFAULTS}) == cfg.model
+    with pytest.raises(ValueError, match="unknown"):
+        Config.from_dict({**flat, "bogus": 1})
 
 
 def _expected_counts(P, speech_in, channels, kernels, D_S, style_hidden, D_e, H, init_hidden, facing=3):
@@ -92,11 +122,11 @@ def test_param_counts_paper_and_tiny():
     # (the code has k1) and a 3-D target-facing input (the code feeds gaze targets instead).
     assert c == _expected_counts(1131, 81, (64, 64), (3, 31), 64, 512, 64, 1024, 1024)
     assert 25.0e6 < sum(c.values()) < 26.0e6  # "25M" (Table 2)
-    t = get_config("tiny")
+    t = preset("tiny").model
     assert count_params("tiny") == _expected_counts(t.pose_dim, 81, t.speech_channels, t.speech_kernels,
                                                     t.speech_embedding, t.style_hidden, t.style_embedding,
                                                     t.gru_hidden, t.init_hidden)
-    shapes = jax.eval_shape(lambda k: S.init_params(CFG, k), jax.random.PRNGKey(0))
+    shapes = jax.eval_shape(lambda k: init_params(CFG, k), jax.random.key(0))
     assert set(shapes) == {"speech_encoder", "style_encoder", "generator"}
 
 
@@ -105,20 +135,20 @@ def test_param_counts_paper_and_tiny():
 def test_kl_nonnegative(mu, logvar):
     mu, logvar = jnp.asarray([mu], jnp.float32), jnp.asarray([logvar], jnp.float32)
     for red in ("sum", "mean"):
-        assert float(L.kl_divergence(mu, logvar, reduction=red)[0]) >= -1e-6
+        assert float(losses.kl_divergence(mu, logvar, reduction=red)[0]) >= -1e-6
 
 
 def test_kl_zero_at_prior_and_positive_elsewhere():
     z = jnp.zeros((3, 8))
-    np.testing.assert_allclose(L.kl_divergence(z, z), 0.0, atol=1e-7)
-    assert float(L.kl_divergence(z + 0.5, z)[0]) == pytest.approx(8 * 0.125, rel=1e-5)
+    np.testing.assert_allclose(losses.kl_divergence(z, z), 0.0, atol=1e-7)
+    assert float(losses.kl_divergence(z + 0.5, z)[0]) == pytest.approx(8 * 0.125, rel=1e-5)
 
 
 def test_kl_weight_monotone_and_capped():
     steps = np.arange(0, 30_000, 250)
-    w = np.asarray(jax.vmap(lambda s: L.kl_weight(s))(steps))
+    w = np.asarray(jax.vmap(lambda s: losses.kl_weight(s))(steps))
     assert np.all(np.diff(w) >= 0) and w.max() == pytest.approx(0.2) and w[0] < 1e-3
-    assert float(L.kl_weight(7500, cap=1.0)) == pytest.approx(0.5)
+    assert float(losses.kl_weight(7500, cap=1.0)) == pytest.approx(0.5)
 
 
 def test_character_state_matches_numpy_integration():
@@ -127,7 +157,7 @@ def test_character_state_matches_numpy_integration():
     vel = rng.normal(size=(T, 3)) * 30
     ang = np.zeros((T, 3))
     ang[:, 1] = rng.normal(size=T)  # yaw rate about Y
-    pos_np, rot_np = Fe.integrate_root(vel, ang, CFG.fps)
+    pos_np, rot_np = features.integrate_root(vel, ang, CFG.fps)
     pose = np.zeros((T, P), np.float32)
     pose[:, CFG.layout.root_velocity] = vel
     pose[:, CFG.layout.root_angular_velocity] = ang
@@ -144,13 +174,13 @@ def test_world_losses_zero_for_identical_and_facing_sensitive():
     pose = jnp.asarray(rng.normal(size=(2, 4, P)), jnp.float32)
     rp = jnp.asarray(rng.normal(size=(2, 4, 3)), jnp.float32)
     rr = R.quat_normalize(jnp.asarray(rng.normal(size=(2, 4, 4)), jnp.float32))
-    terms = L.reconstruction_terms(pose, rp, rr, pose, rp, rr, cfg=CFG)
-    assert set(terms) == set(L.term_weights(CFG))
+    terms = losses.reconstruction_terms(pose, rp, rr, pose, rp, rr, cfg=CFG)
+    assert set(terms) == set(losses.term_weights(TINY.train))
     for k, v in terms.items():
         assert v.shape == (2,)
         np.testing.assert_allclose(v, 0.0, atol=1e-6, err_msg=k)
     turned = R.quat_mul(jnp.asarray([0.0, 0.0, 1.0, 0.0]), rr)  # 180 deg about Y
-    t2 = L.reconstruction_terms(pose, rp, rr, pose, rp, turned, cfg=CFG)
+    t2 = losses.reconstruction_terms(pose, rp, rr, pose, rp, turned, cfg=CFG)
     assert float(t2["facing"].min()) > 0.1 and float(t2["local_position"].max()) == 0.0
 
 
@@ -173,12 +203,12 @@ def test_fk_position_terms_follow_the_rendered_rotations():
     pose = jnp.asarray(pose)
     rp = jnp.zeros((2, 4, 3))
     rr = jnp.zeros((2, 4, 4)).at[..., 0].set(1.0)
-    terms = L.reconstruction_terms(pose, rp, rr, pose, rp, rr, cfg=cfg)
+    terms = losses.reconstruction_terms(pose, rp, rr, pose, rp, rr, cfg=cfg)
     for k, v in terms.items():
         np.testing.assert_allclose(v, 0.0, atol=1e-5, err_msg=k)
     # An arm's position channels moved: only predicted_position sees it.
     moved = pose.at[..., 3 * 3:3 * 4].add(10.0)
-    t = L.reconstruction_terms(moved, rp, rr, pose, rp, rr, cfg=cfg)
+    t = losses.reconstruction_terms(moved, rp, rr, pose, rp, rr, cfg=cfg)
     assert float(t["predicted_position"].min()) > 1.0
     for k in ("local_position", "world_position", "fd_local_position", "fd_world_position"):
         np.testing.assert_allclose(t[k], 0.0, atol=1e-5, err_msg=k)
@@ -187,11 +217,11 @@ def test_fk_position_terms_follow_the_rendered_rotations():
     q2 = q.copy()
     q2[..., 2, :] = R.quat_mul(R.euler_to_quat(np.array([0.0, 0.0, 40.0]), "XYZ"), q[..., 2, :])
     turned[..., lay.local_rotations] = R.quat_to_6d(q2).reshape(2, 4, 6 * j)
-    t = L.reconstruction_terms(jnp.asarray(turned), rp, rr, pose, rp, rr, cfg=cfg)
+    t = losses.reconstruction_terms(jnp.asarray(turned), rp, rr, pose, rp, rr, cfg=cfg)
     assert float(t["local_position"].min()) > 0.5 and float(t["world_position"].min()) > 0.5
     np.testing.assert_allclose(t["predicted_position"], 0.0, atol=1e-6)
     # Without the rig (the old behaviour) the position terms read the channels and predicted_position is 0.
-    t = L.reconstruction_terms(moved, rp, rr, pose, rp, rr, cfg=CFG)
+    t = losses.reconstruction_terms(moved, rp, rr, pose, rp, rr, cfg=CFG)
     assert float(t["local_position"].min()) > 1.0 and float(t["predicted_position"].max()) == 0.0
 
 
@@ -208,9 +238,9 @@ def _gen_inputs(B=2, T=5, seed=0):
 def test_scan_generator_equals_python_loop(params):
     mean = jnp.asarray(np.linspace(-1, 1, P), jnp.float32)
     std = jnp.asarray(np.linspace(0.5, 2, P), jnp.float32)
-    scan = jax.jit(lambda p, *a: S.ZeggsModel(CFG).apply({"params": p}, *a, mean, std,
-                                                          method=S.ZeggsModel.generate),
-                   compiler_options=CFG.compiler_options)
+    scan = jax.jit(lambda p, *a: ZeggsModel(CFG).apply({"params": p}, *a, mean, std,
+                                                          method=ZeggsModel.generate),
+                   compiler_options=TINY.train.compiler_options)
     pose0, rp0, rr0, facing, speech, style = _gen_inputs()
     out = scan(params, speech, style, pose0, rp0, rr0, facing)
     ref = generate_loop_reference(CFG, params["generator"], pose0, rp0, rr0, facing, speech, style, mean, std)
@@ -227,26 +257,26 @@ def forward():
 
     @jax.jit
     def f(params, key, temperature):
-        return S.ZeggsModel(CFG).apply(
+        return ZeggsModel(CFG).apply(
             {"params": params}, b["speech"], b["style"], b["style_mask"], b["pose"][:, 0],
             b["root_position"][:, 0], b["root_rotation"][:, 0], b["facing"], key, temperature=temperature)
     return f
 
 
 def test_same_seed_same_output_different_seed_differs(params, forward):
-    a, aux_a = forward(params, jax.random.PRNGKey(3), 1.0)
-    b, _ = forward(params, jax.random.PRNGKey(3), 1.0)
-    c, aux_c = forward(params, jax.random.PRNGKey(4), 1.0)
+    a, aux_a = forward(params, jax.random.key(3), 1.0)
+    b, _ = forward(params, jax.random.key(3), 1.0)
+    c, aux_c = forward(params, jax.random.key(4), 1.0)
     np.testing.assert_array_equal(a["pose"], b["pose"])
     assert not np.allclose(a["pose"], c["pose"])
     np.testing.assert_array_equal(aux_a["mu"], aux_c["mu"])  # only the sample depends on the key
-    _, aux_d = forward(params, jax.random.PRNGKey(4), 0.0)  # temperature 0: the posterior mean
+    _, aux_d = forward(params, jax.random.key(4), 0.0)  # temperature 0: the posterior mean
     np.testing.assert_allclose(aux_d["style_embedding"], aux_d["mu"], atol=1e-7)
 
 
 def test_sample_style_temperature_scales_spread():
     mu, logvar = jnp.zeros((4000, 2)), jnp.zeros((4000, 2))
-    e = sample_style(mu, logvar, jax.random.PRNGKey(0), temperature=0.5)
+    e = sample_style(mu, logvar, jax.random.key(0), temperature=0.5)
     assert float(jnp.std(e)) == pytest.approx(0.5, rel=0.05)
 
 
@@ -267,53 +297,61 @@ def test_masked_style_batch_equals_one_at_a_time(params):
 
 
 def test_train_step_decreases_loss_without_retrace(params):
+    """The step takes the pose statistics as an argument: other statistics of the same shape reuse the
+    compilation (one trace)."""
     # Adam at 3e-3 instead of the paper's RAdam 1e-4 so 30 steps show learning; the step is the same.
     tx = optax.adam(3e-3)
-    state = S.TrainState.create(apply_fn=S.ZeggsModel(CFG).apply, params=params, tx=tx)
+    state = TrainState.create(apply_fn=ZeggsModel(CFG).apply, params=params, tx=tx)
     rng = np.random.default_rng(0)
-    mean = rng.normal(size=P).astype(np.float32)
-    std = rng.uniform(0.5, 2.0, size=P).astype(np.float32)
-    step = jax.jit(chex.assert_max_traces(S.make_train_step(CFG, tx, pose_mean=mean, pose_std=std), n=1),
-                   donate_argnums=(0,), compiler_options=CFG.compiler_options)
+    stats = steps.pose_stats(CFG, rng.normal(size=P), rng.uniform(0.5, 2.0, size=P))
+    step = jax.jit(chex.assert_max_traces(steps.make_train_step(TINY), n=1),
+                   donate_argnums=(0,), compiler_options=TINY.train.compiler_options)
     batch = _batch()
-    key = jax.random.PRNGKey(0)
-    losses = []
+    key = jax.random.key(0)
+    history = []
     for _ in range(30):
-        state, m = step(state, batch, key)
-        losses.append(float(m["loss"]))
-    assert all(np.isfinite(losses))
-    assert np.mean(losses[-3:]) < 0.8 * np.mean(losses[:3]), losses
+        state, m = step(state, batch, key, stats)
+        history.append(float(m["loss"]))
+    assert all(np.isfinite(history))
+    assert np.mean(history[-3:]) < 0.8 * np.mean(history[:3]), history
     assert int(state.step) == 30
     assert {"loss", "recon", "kl", "kl_weight", "facing", "fd_world_position"} <= set(m)
+    other = steps.pose_stats(CFG, rng.normal(size=P), rng.uniform(0.5, 2.0, size=P))
+    state, m2 = step(state, batch, key, other)  # no retrace (assert_max_traces would raise)
+    assert np.isfinite(float(m2["loss"])) and float(m2["loss"]) != history[-1]
 
 
 def test_optimizer_is_radam_with_staircase_decay():
-    cfg = get_config("paper")
-    tx = S.make_optimizer(cfg)
+    """make_optimizer's own schedule: with a constant gradient RAdam's first (un-rectified) updates are
+    -lr(t) exactly, so a decay every 2 steps by 0.5 shows as 1, 1, 0.5, 0.5 times the rate."""
+    cfg = preset("paper").override(lr_decay_steps=2, lr_decay=0.5)
+    tx = steps.make_optimizer(cfg)
     p = {"w": jnp.ones(3)}
-    st_ = tx.init(p)
+    state = tx.init(p)
     g = {"w": jnp.ones(3)}
-    # RAdam's first steps are un-adapted momentum SGD: the update is -lr * m_hat = -lr * g.
-    upd, _ = tx.update(g, st_, p)
-    np.testing.assert_allclose(upd["w"], -cfg.learning_rate * np.ones(3), rtol=1e-5)
-    sched = optax.exponential_decay(1e-4, 1000, 0.995, staircase=True)
+    seen = []
+    for _ in range(4):
+        upd, state = tx.update(g, state, p)
+        seen.append(float(upd["w"][0]))
+    np.testing.assert_allclose(seen, -1e-4 * np.array([1.0, 1.0, 0.5, 0.5]), rtol=1e-5)
+    sched = steps.learning_rate_schedule(preset("paper"))  # the paper's: x0.995 every 1k steps
     assert float(sched(999)) == pytest.approx(1e-4) and float(sched(1000)) == pytest.approx(0.995e-4)
 
 
 def test_compile_options_tiny_only_and_cli_overrides():
     from jaxgest.zeggs.cli import parse_overrides
-    from jaxgest.zeggs.config import config_from_dict
 
-    paper = get_config("paper")
-    assert paper.xla_opt_level is None and paper.compiler_options is None  # the paper preset: XLA defaults
-    assert CFG.compiler_options == {"xla_backend_optimization_level": 0}
-    assert config_from_dict(CFG.to_dict()) == CFG
-    old = {k: v for k, v in paper.to_dict().items() if k != "xla_opt_level"}  # a config.json from before the field
-    assert config_from_dict(old) == paper
+    paper = preset("paper")
+    assert paper.train.xla_opt_level is None and paper.train.compiler_options is None  # XLA defaults
+    assert paper.inference.compiler_options is None
+    assert TINY.train.compiler_options == TINY.inference.compiler_options == {"xla_backend_optimization_level": 0}
+    old = {k: v for k, v in {**paper.model.to_dict(), **paper.train.to_dict()}.items()
+           if k not in ("xla_opt_level", "steps")}  # a flat config.json from before the field
+    assert Config.from_dict(old) == paper
     o = parse_overrides(["xla_opt_level=none", "gru_hidden=128", "speech_channels=32,32", "mirror=false",
-                         "learning_rate=3e-4"])
+                         "learning_rate=3e-4", "temperature=0.5"])
     assert o == {"xla_opt_level": None, "gru_hidden": 128, "speech_channels": (32, 32), "mirror": False,
-                 "learning_rate": 3e-4}
+                 "learning_rate": 3e-4, "temperature": 0.5}
     for bad in ("gru=3", "num_joints=4", "gru_hidden=big", "mirror=maybe", "gru_hidden"):
         with pytest.raises(JaxgestError, match="--override"):
             parse_overrides([bad])
@@ -325,7 +363,7 @@ def test_to_world_equals_quaternion_rotation(key):
              zip(("position", "rotation", "velocity", "angular"), jax.random.split(k1, 4), (3, 6, 3, 3))}
     q = R.quat_normalize(jax.random.normal(k2, (2, 5, 4)))
     r = jax.random.normal(k3, (2, 5, 3))
-    w = L.to_world(parts, r, q)
+    w = losses.to_world(parts, r, q)
     qj = q[:, :, None]
     np.testing.assert_allclose(w["position"], R.quat_rotate(qj, parts["position"]) + r[:, :, None], atol=1e-5)
     rot = parts["rotation"]
@@ -343,7 +381,7 @@ def test_input_normalisation_is_one_std_per_group_outputs_per_channel():
     rng = np.random.default_rng(4)
     x = rng.normal(size=(500, P)) * rng.uniform(0.01, 50.0, size=P) + rng.normal(size=P) * 10
     x[:, 3] = 7.0 + 1e-4 * rng.normal(size=500)  # a near-constant channel
-    stats = Fe.pose_statistics([x[:250], x[250:]], trim=0)
+    stats = features.pose_statistics([x[:250], x[250:]], trim=0)
     scale = np.asarray(input_scale(CFG, jnp.asarray(stats.mean), jnp.asarray(stats.std)))
     x_in = stats.normalize(x) * scale
     lay = CFG.layout
@@ -361,14 +399,14 @@ def test_pose_statistics_leave_out_clip_ends():
     for c in spiked:
         c[:2] += 1e3  # boundary artefacts (copied velocities) at both ends
         c[-2:] -= 1e3
-    a, b = Fe.pose_statistics(clips), Fe.pose_statistics(spiked)
+    a, b = features.pose_statistics(clips), features.pose_statistics(spiked)
     np.testing.assert_allclose(a.mean, b.mean)
     np.testing.assert_allclose(a.std, b.std)
     full = np.concatenate([c[2:-2] for c in clips])
     np.testing.assert_allclose(a.std, full.std(0))
     from jaxgest.motion.datasets import NormStats
 
-    old = Fe.pose_statistics(spiked, input_norm="channel")  # the old statistics: every frame, floor 1e-2
+    old = features.pose_statistics(spiked, input_norm="channel")  # the old statistics: every frame, floor 1e-2
     ref = NormStats.from_data(spiked)
     np.testing.assert_array_equal(old.mean, ref.mean)
     np.testing.assert_array_equal(old.std, ref.std)

@@ -1,9 +1,11 @@
-"""ZeroEGGS user-facing API (SPEC §7): ``generate``, ``load_model`` and ``count_params``.
+"""ZeroEGGS user-facing API (SPEC §7): ``generate``, ``load_model``, ``count_params`` and ``ModelCache``.
 
 ``generate(audio, styles, *, workdir, weights=None, seed=0, temperature=1.0) -> Motion`` is what
 ``jaxgest zeggs generate`` calls: gestures for a speech file (path or ``(samples, sr)``) in the style of
 one example clip or a weighted blend of several (Motions or BVH paths), on the first style clip's skeleton
-with ``round(duration * fps)`` frames at its frame rate.
+with ``round(duration * fps)`` frames at its frame rate. It reuses loaded models through
+:data:`MODEL_CACHE`, an explicit :class:`ModelCache` keyed on the workdir and its newest checkpoint step
+(``cache=None`` reads the workdir every call).
 
 References: Ghorbani et al. 2023, §3 (zero-shot style from an example clip), §5.2.1 (blending), Table 2
 (about 25 M parameters).
@@ -11,6 +13,7 @@ References: Ghorbani et al. 2023, §3 (zero-shot style from an example clip), §
 
 from __future__ import annotations
 
+import collections
 import os
 import pathlib
 from typing import Optional, Sequence, Union
@@ -21,11 +24,12 @@ import numpy as np
 from jaxgest.errors import JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.skeleton import Motion
-from jaxgest.zeggs.config import ZeggsConfig, get_config
-from jaxgest.zeggs.inference import ZeggsModel_, load_model
-from jaxgest.zeggs.steps import init_params
+from jaxgest.zeggs.config import Config, ModelConfig, preset as get_preset
+from jaxgest.zeggs.inference import TrainedZeggs, load_model
+from jaxgest.zeggs.model import param_shapes
+from jaxgest.zeggs.workdir import CKPT_SUBDIR, latest_step
 
-__all__ = ["count_params", "generate", "load_model", "ZeggsModel_"]
+__all__ = ["count_params", "generate", "load_model", "ModelCache", "MODEL_CACHE", "TrainedZeggs"]
 
 StyleLike = Union[Motion, str, os.PathLike]
 
@@ -46,15 +50,56 @@ def _as_motions(styles) -> list[Motion]:
     return out
 
 
+class ModelCache:
+    """Loaded models by workdir, reused while the workdir's newest checkpoint is the same.
+
+    The key is ``(resolved workdir, newest checkpoint step, that step folder's modification time)``: a run
+    that trains further (a new step) or is retrained into the same workdir (a rewritten step folder) is
+    loaded again. At most ``maxsize`` models are kept (least recently used dropped). ``clear()`` empties it.
+    """
+
+    def __init__(self, maxsize: int = 2):
+        self.maxsize = int(maxsize)
+        self._models: collections.OrderedDict = collections.OrderedDict()
+
+    @staticmethod
+    def key(workdir) -> tuple:
+        workdir = pathlib.Path(workdir).resolve()
+        step = latest_step(workdir)
+        folder = workdir / CKPT_SUBDIR / str(step)
+        return str(workdir), step, folder.stat().st_mtime_ns if step is not None else None
+
+    def get(self, workdir) -> TrainedZeggs:
+        """The model of ``workdir``: cached, or loaded (:func:`load_model`) and cached."""
+        k = self.key(workdir)
+        if k in self._models:
+            self._models.move_to_end(k)
+            return self._models[k]
+        model = load_model(workdir)
+        self._models[k] = model
+        while len(self._models) > self.maxsize:
+            self._models.popitem(last=False)
+        return model
+
+    def clear(self) -> None:
+        self._models.clear()
+
+
+MODEL_CACHE = ModelCache()  # what generate() uses by default
+
+
 def generate(audio, styles: Union[StyleLike, Sequence[StyleLike]], *, workdir,
              weights: Optional[Sequence[float]] = None, seed: int = 0, temperature: float = 1.0,
-             pca_edits: Optional[dict] = None, normalize_weights: bool = False) -> Motion:
+             pca_edits: Optional[dict] = None, normalize_weights: bool = False,
+             cache: Optional[ModelCache] = MODEL_CACHE) -> Motion:
     """Gestures for ``audio`` (a WAV/FLAC path, or ``(samples, sample_rate)``) in the style of ``styles``.
 
     ``styles``: one Motion or BVH path, or a list of them, blended as ``sum_i w_i e_i`` with ``weights``
     as given (one per clip, finite; default ``1 / n`` each; (2, 0) gives twice the first embedding);
-    ``normalize_weights=True`` divides them by their sum (which must be positive). ``seed`` and ``temperature`` drive the style-embedding sample;
+    ``normalize_weights=True`` divides them by their sum (which must be positive). ``seed`` and
+    ``temperature`` drive the style-embedding sample;
     ``pca_edits`` ``{component: delta in std}`` needs ``workdir/pca.json`` (``jaxgest zeggs pca``).
+    ``cache``: where loaded models are kept (:class:`ModelCache`; None: load the workdir now).
     Returns a Motion on the first style clip's skeleton at its frame rate, ``round(duration * fps)`` frames.
     References: Ghorbani et al. 2023, §3, §5.2.
     """
@@ -67,18 +112,18 @@ def generate(audio, styles: Union[StyleLike, Sequence[StyleLike]], *, workdir,
         raise JaxgestError(f"{audio}: no such audio file")
     elif not isinstance(audio, (str, os.PathLike)):
         raise JaxgestError("audio must be a path or a (samples, sample_rate) pair")
-    return load_model(workdir).generate(audio, _as_motions(styles), weights=weights, seed=seed,
-                                        temperature=temperature, pca_edits=pca_edits, sr=sr,
-                                        normalize_weights=normalize_weights)
+    model = load_model(workdir) if cache is None else cache.get(workdir)
+    return model.generate(audio, _as_motions(styles), weights=weights, seed=seed, temperature=temperature,
+                          pca_edits=pca_edits, sr=sr, normalize_weights=normalize_weights)
 
 
-def count_params(preset: str | ZeggsConfig = "paper") -> dict[str, int]:
+def count_params(preset: str | Config | ModelConfig = "paper") -> dict[str, int]:
     """Parameters of a freshly initialised model: ``{"speech_encoder", "style_encoder", "generator"}``.
 
     Shapes only (``jax.eval_shape``): nothing is allocated. The paper preset assumes the paper's 75-joint
     rig, pose vector 15 * 75 + 6 = 1131 channels.
     """
-    cfg = preset if isinstance(preset, ZeggsConfig) else get_config(preset)
-    shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
+    cfg = get_preset(preset) if isinstance(preset, str) else preset
+    shapes = param_shapes(cfg.model if isinstance(cfg, Config) else cfg)
     return {name: int(sum(np.prod(x.shape) for x in jax.tree_util.tree_leaves(shapes[name])))
             for name in ("speech_encoder", "style_encoder", "generator")}

@@ -18,7 +18,8 @@ def register(subparsers) -> None:
                    "(default: the built-in synthetic data, written to W/synthetic-data)")
     t.add_argument("--workdir", required=True, help="run folder (checkpoints, stats, metrics.jsonl)")
     t.add_argument("--preset", default="tiny", choices=("tiny", "small", "paper"))
-    t.add_argument("--steps", type=int, default=None, help="total training steps (default: tiny 300)")
+    t.add_argument("--steps", type=int, default=None,
+                   help="total training steps (default: the preset's, tiny 300, small 8000, paper 120000)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
     t.add_argument("--ckpt-every", type=int, default=None,
@@ -39,7 +40,8 @@ def register(subparsers) -> None:
     g.add_argument("--normalize-weights", action="store_true",
                    help="divide the blend weights by their sum (which must then be positive)")
     g.add_argument("--seed", type=int, default=0)
-    g.add_argument("--temperature", type=float, default=1.0)
+    g.add_argument("--temperature", type=float, default=None,
+                   help="style sampling temperature (default: the model's inference config, 1.0)")
     g.add_argument("--pca-edit", action="append", default=[], metavar="K=DELTA",
                    help="move the style embedding along PCA component K by DELTA standard deviations")
     g.add_argument("--out", required=True, help="output BVH (on the first style clip's skeleton)")
@@ -61,11 +63,17 @@ def register(subparsers) -> None:
 
 
 def _train(args) -> int:
+    from jaxgest.motion.synthetic.dataset import training_folder
+    from jaxgest.training import check_intervals, check_steps
     from jaxgest.zeggs.train import train
 
-    r = train(args.data, args.workdir, preset=args.preset, steps=args.steps,
+    overrides = {**parse_overrides(args.override), **({"loudness": False} if args.no_loudness else {})}
+    check_steps(steps=args.steps)  # before any data is written
+    check_intervals(log_every=args.log_every, ckpt_every=args.ckpt_every)
+    data = training_folder(args.data, args.workdir)  # no --data: the built-in synthetic data, written once
+    r = train(data, args.workdir, preset=args.preset, steps=args.steps,
               seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-              overrides={**parse_overrides(args.override), **({"loudness": False} if args.no_loudness else {})})
+              overrides=overrides)
     final = r["final"]
     if r["start_step"] >= r["steps"]:
         if r["start_step"] == 0:
@@ -80,13 +88,13 @@ def _train(args) -> int:
 
 
 def parse_overrides(items) -> dict:
-    """``["gru_hidden=128", "speech_channels=32,32", "mirror=false"]`` -> typed config overrides."""
-    import dataclasses
+    """``["gru_hidden=128", "speech_channels=32,32", "mirror=false"]`` -> typed config overrides (bare field
+    names of any part of :class:`jaxgest.zeggs.config.Config`)."""
+    from jaxgest.zeggs.config import Config
 
-    from jaxgest.zeggs.config import ZeggsConfig
-
-    fields = {f.name: f for f in dataclasses.fields(ZeggsConfig)}
-    defaults = ZeggsConfig()
+    defaults = Config()
+    fields = {name: getattr(part, name) for part in (defaults.model, defaults.train, defaults.inference)
+              for name in part.to_dict()}
     out = {}
     for item in items:
         name, sep, text = item.partition("=")
@@ -94,7 +102,7 @@ def parse_overrides(items) -> dict:
         if not sep or name not in fields or name == "num_joints":
             raise JaxgestError(f"--override {item!r}: expected FIELD=VALUE with FIELD a ZeroEGGS config field "
                                "(see jaxgest/zeggs/config.py; num_joints comes from the data)")
-        default = getattr(defaults, name)
+        default = fields[name]
         try:
             if default is None:  # optional int (xla_opt_level)
                 value = None if text.lower() == "none" else int(text)
@@ -146,7 +154,7 @@ def _pca(args) -> int:
     import numpy as np
 
     from jaxgest.motion.datasets import load_folder
-    from jaxgest.zeggs.evaluate import style_windows
+    from jaxgest.zeggs.probes import style_windows
     from jaxgest.zeggs.inference import load_model
     from jaxgest.zeggs.pca import fit_pca
 

@@ -47,10 +47,10 @@ from typing import Optional, Sequence
 import numpy as np
 
 from jaxgest.errors import DataError
-from jaxgest.motion import kinematics as K
-from jaxgest.motion import rotations as R
+from jaxgest.motion import kinematics
+from jaxgest.motion import rotations
 from jaxgest.motion.datasets import Clip, NormStats, load_clip_audio, load_folder, resample_motion
-from jaxgest.zeggs import features as Fe
+from jaxgest.zeggs import features
 
 LENGTH_TOLERANCE_S = 1.0
 SAMPLING_MODES = ("overlap", "disjoint", "other-clip")
@@ -59,7 +59,7 @@ WORLD_FORWARD = np.array([0.0, 0.0, 1.0])
 
 
 @dataclasses.dataclass
-class Sequence_:
+class AlignedSequence:
     """One training sequence (a clip, maybe mirrored / sped up) at the model rate."""
 
     name: str
@@ -83,7 +83,7 @@ def clip_facing(root_rotation: np.ndarray) -> np.ndarray:
     The paper takes the median of the projected head z-axis; the root's forward (hips) is used here
     because it exists on every rig. References: Ghorbani et al. 2023, §4.1.
     """
-    fwd = R.quat_rotate(root_rotation, np.broadcast_to(WORLD_FORWARD, root_rotation.shape[:-1] + (3,)))
+    fwd = rotations.quat_rotate(root_rotation, np.broadcast_to(WORLD_FORWARD, root_rotation.shape[:-1] + (3,)))
     med = np.median(fwd, axis=0)
     med[1] = 0.0
     n = np.linalg.norm(med)
@@ -98,7 +98,7 @@ def _time_resample(x: np.ndarray, frames: int) -> np.ndarray:
 
 
 def clip_sequences(clip: Clip, *, fps: float, mirror: bool = True, speeds: Sequence[float] = SPEEDS,
-                   min_frames: int = 2, loudness: bool = True) -> list[Sequence_]:
+                   min_frames: int = 2, loudness: bool = True) -> list[AlignedSequence]:
     """All training sequences of one clip (original, mirrored; each at every speed)."""
     from jaxgest.audio import speech_features
 
@@ -107,12 +107,12 @@ def clip_sequences(clip: Clip, *, fps: float, mirror: bool = True, speeds: Seque
     samples, sr = load_clip_audio(clip)
     speech = np.asarray(speech_features(samples, sr=sr, fps=fps, loudness=loudness), np.float32)
     out = []
-    variants = [("", clip.motion)] + ([("_mirror", K.mirror(clip.motion))] if mirror else [])
+    variants = [("", clip.motion)] + ([("_mirror", kinematics.mirror(clip.motion))] if mirror else [])
     for suffix, motion in variants:
         for speed in speeds:
             # Playing `speed` times faster: the same poses over 1/speed of the time.
             m = resample_motion(motion.replace(fps=motion.fps * speed), fps)
-            feats = Fe.extract_features(m)
+            feats = features.extract_features(m)
             pose = feats["features"]
             sp = speech if speed == 1.0 else _time_resample(speech, max(2, int(round(len(speech) / speed))))
             diff = abs(len(sp) - len(pose)) / fps
@@ -125,7 +125,7 @@ def clip_sequences(clip: Clip, *, fps: float, mirror: bool = True, speeds: Seque
             if n < min_frames:
                 continue
             rot = feats["root_rotation"][:n]
-            out.append(Sequence_(
+            out.append(AlignedSequence(
                 name=f"{clip.path.stem if clip.path else clip.content}{suffix}@{speed:g}",
                 style=clip.style, pose=pose[:n], speech=sp[:n], root_position=feats["root_position"][:n],
                 root_rotation=rot, facing=clip_facing(rot), clip=str(clip.path) if clip.path else clip.content,
@@ -185,15 +185,15 @@ class ZeggsData:
         return out
 
 
-def target_arrays(s: Sequence_, t0: int, window: int, pose_stats: NormStats, speech_stats: NormStats) -> dict:
+def target_arrays(s: AlignedSequence, t0: int, window: int, pose_stats: NormStats, speech_stats: NormStats) -> dict:
     """The target part of one batch row (frames ``[t0, t0 + window)`` of ``s``): ``speech``, ``pose``
     (normalised), ``root_position`` / ``root_rotation`` relative to the window's first frame and ``facing``
     in that frame (layout in the module docstring, without the batch axis)."""
     sl = slice(t0, t0 + window)
-    inv0 = R.quat_inv(s.root_rotation[t0])
+    inv0 = rotations.quat_inv(s.root_rotation[t0])
     return {"speech": speech_stats.normalize(s.speech[sl]), "pose": pose_stats.normalize(s.pose[sl]),
-            "root_position": R.quat_rotate(inv0, s.root_position[sl] - s.root_position[t0]),
-            "root_rotation": R.quat_mul(inv0, s.root_rotation[sl]), "facing": R.quat_rotate(inv0, s.facing)}
+            "root_position": rotations.quat_rotate(inv0, s.root_position[sl] - s.root_position[t0]),
+            "root_rotation": rotations.quat_mul(inv0, s.root_rotation[sl]), "facing": rotations.quat_rotate(inv0, s.facing)}
 
 
 def style_window(sequences, i: int, rng, *, window: int, style_min: int, style_max: int,
@@ -262,7 +262,7 @@ def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Seq
         seqs.extend(clip_sequences(c, fps=fps, mirror=mirror, speeds=speeds, loudness=loudness))
     if not seqs:
         raise DataError("every clip is too short to use")
-    pose_stats = pose_stats or Fe.pose_statistics([s.pose for s in seqs], input_norm=input_norm)
+    pose_stats = pose_stats or features.pose_statistics([s.pose for s in seqs], input_norm=input_norm)
     speech_stats = speech_stats or NormStats.from_data([s.speech for s in seqs])
     return ZeggsData(seqs, pose_stats, speech_stats, fps, clips[0].motion.skeleton)
 

@@ -35,7 +35,7 @@ import jax
 import numpy as np
 
 from jaxgest.errors import DataError
-from jaxgest.motion import rotations as R
+from jaxgest.motion import rotations
 from jaxgest.motion.skeleton import Motion, Skeleton
 
 
@@ -126,7 +126,7 @@ def translated_joints(skeleton: Skeleton) -> tuple[int, ...]:
 
 
 def fk_fields(skeleton: Skeleton) -> dict:
-    """The rig as ``ZeggsConfig`` fields (``fk_parents``, ``fk_offsets``, ``fk_translated``), so the losses
+    """The rig as ``ModelConfig`` fields (``fk_parents``, ``fk_offsets``, ``fk_translated``), so the losses
     can compute joint positions by forward kinematics of the predicted rotations (what is rendered)."""
     return {"fk_parents": tuple(int(p) for p in skeleton.parents),
             "fk_offsets": tuple(float(x) for x in np.asarray(skeleton.offsets, np.float64).ravel()),
@@ -168,7 +168,7 @@ def _yaw_from_forward(forward: np.ndarray, up_axis: int) -> np.ndarray:
     n = np.linalg.norm(f, axis=-1, keepdims=True)
     fwd_axis = _world_forward(up_axis)
     f = np.where(n > 1e-9, f / np.maximum(n, 1e-12), fwd_axis)
-    return R.quat_between(np.broadcast_to(fwd_axis, f.shape), f)
+    return rotations.quat_between(np.broadcast_to(fwd_axis, f.shape), f)
 
 
 def _world_forward(up_axis: int) -> np.ndarray:
@@ -198,7 +198,7 @@ def character_root(motion: Motion, spec: RootSpec | None = None):
         forward = np.cross(lateral, up_vec)
     else:
         grot = global_rotations(motion)[:, sk.index(spec.hips)]
-        forward = R.quat_rotate(grot, np.broadcast_to(_world_forward(up), grot.shape[:-1] + (3,)))
+        forward = rotations.quat_rotate(grot, np.broadcast_to(_world_forward(up), grot.shape[:-1] + (3,)))
     return root_pos, _yaw_from_forward(forward, up)
 
 
@@ -212,7 +212,7 @@ def _backward_diff(x: np.ndarray, fps: float) -> np.ndarray:
 def _angular_velocity(q: np.ndarray, fps: float) -> np.ndarray:
     """Scaled angle-axis of ``q_t q_{t-1}^-1`` times fps, in the world frame; (F, ..., 3)."""
     w = np.empty(q.shape[:-1] + (3,))
-    w[1:] = R.quat_to_expmap(R.quat_mul(q[1:], R.quat_inv(q[:-1]))) * fps
+    w[1:] = rotations.quat_to_expmap(rotations.quat_mul(q[1:], rotations.quat_inv(q[:-1]))) * fps
     w[0] = w[1] if len(q) > 1 else 0.0
     return w
 
@@ -229,24 +229,24 @@ def extract_features(motion: Motion, spec: RootSpec | None = None) -> dict:
         raise DataError(f"{motion.name or 'motion'}: needs at least 2 frames for velocities")
     fps = motion.fps
     pos = forward_kinematics(motion)
-    grot = R.quat_unroll(global_rotations(motion), axis=0)
+    grot = rotations.quat_unroll(global_rotations(motion), axis=0)
     root_pos, root_rot = character_root(motion, spec)
-    root_rot = R.quat_unroll(root_rot, axis=0)
-    inv_root = R.quat_inv(root_rot)[:, None]  # (F, 1, 4)
+    root_rot = rotations.quat_unroll(root_rot, axis=0)
+    inv_root = rotations.quat_inv(root_rot)[:, None]  # (F, 1, 4)
     J = motion.skeleton.num_joints
 
-    local_pos = R.quat_rotate(inv_root, pos - root_pos[:, None])
-    local_rot = R.quat_mul(np.broadcast_to(inv_root, grot.shape), grot)
-    local_vel = R.quat_rotate(inv_root, _backward_diff(pos, fps))
-    local_ang = R.quat_rotate(inv_root, _angular_velocity(grot, fps))
-    root_vel = R.quat_rotate(inv_root[:, 0], _backward_diff(root_pos, fps))
-    root_ang = R.quat_rotate(inv_root[:, 0], _angular_velocity(root_rot, fps))
+    local_pos = rotations.quat_rotate(inv_root, pos - root_pos[:, None])
+    local_rot = rotations.quat_mul(np.broadcast_to(inv_root, grot.shape), grot)
+    local_vel = rotations.quat_rotate(inv_root, _backward_diff(pos, fps))
+    local_ang = rotations.quat_rotate(inv_root, _angular_velocity(grot, fps))
+    root_vel = rotations.quat_rotate(inv_root[:, 0], _backward_diff(root_pos, fps))
+    root_ang = rotations.quat_rotate(inv_root[:, 0], _angular_velocity(root_rot, fps))
 
     F = motion.num_frames
     feats = np.concatenate(
         [
             local_pos.reshape(F, 3 * J),
-            R.quat_to_6d(local_rot).reshape(F, 6 * J),
+            rotations.quat_to_6d(local_rot).reshape(F, 6 * J),
             local_vel.reshape(F, 3 * J),
             local_ang.reshape(F, 3 * J),
             root_vel,
@@ -294,8 +294,8 @@ def integrate_root(root_vel: np.ndarray, root_ang: np.ndarray, fps: float, start
     pos = np.zeros((F, 3))
     for t in range(F):
         if t > 0:
-            q = R.quat_normalize(R.quat_mul(R.expmap_to_quat(R.quat_rotate(q, root_ang[t]) / fps), q))
-            p = p + R.quat_rotate(q, root_vel[t]) / fps
+            q = rotations.quat_normalize(rotations.quat_mul(rotations.expmap_to_quat(rotations.quat_rotate(q, root_ang[t]) / fps), q))
+            p = p + rotations.quat_rotate(q, root_vel[t]) / fps
         pos[t], rot[t] = p, q
     return pos, rot
 
@@ -315,16 +315,16 @@ def features_to_motion(features: np.ndarray, template: Motion, root_position: np
     rot6 = f[:, layout.local_rotations].reshape(F, J, 6)
     lpos = f[:, layout.local_positions].reshape(F, J, 3)
     root_rotation = np.asarray(root_rotation, np.float64)
-    grot = R.quat_mul(np.broadcast_to(root_rotation[:, None], (F, J, 4)), R.sixd_to_quat(rot6))
+    grot = rotations.quat_mul(np.broadcast_to(root_rotation[:, None], (F, J, 4)), rotations.sixd_to_quat(rot6))
     local = np.empty_like(grot)
     for j in range(J):
         p = sk.parents[j]
-        local[:, j] = grot[:, j] if p < 0 else R.quat_mul(R.quat_inv(grot[:, p]), grot[:, j])
+        local[:, j] = grot[:, j] if p < 0 else rotations.quat_mul(rotations.quat_inv(grot[:, p]), grot[:, j])
     # The root and the joints down to the hips (Bandai-Namco's Hips under a static joint_Root) get their
     # translation back from the predicted positions -- a property of the rig, not of the template's frames
     # (at inference the template repeats one frame); so do joints animated in a multi-frame template.
     # The others keep the template's rest offsets (bone lengths).
-    world = R.quat_rotate(root_rotation[:, None], lpos) + np.asarray(root_position, np.float64)[:, None]
+    world = rotations.quat_rotate(root_rotation[:, None], lpos) + np.asarray(root_position, np.float64)[:, None]
     trans = np.broadcast_to(sk.offsets[None], (F, J, 3)).copy()
     animated = template.translations.std(axis=0).max(axis=-1) > 1e-6
     animated[list(translated_joints(sk))] = True
@@ -333,11 +333,11 @@ def features_to_motion(features: np.ndarray, template: Motion, root_position: np
         if p < 0:
             trans[:, j] = world[:, j]
         elif animated[j]:
-            trans[:, j] = R.quat_rotate(R.quat_inv(grot[:, p]), world[:, j] - world[:, p])
-    return Motion(sk, R.quat_canonicalize(local), trans, fps or template.fps, name=name or template.name)
+            trans[:, j] = rotations.quat_rotate(rotations.quat_inv(grot[:, p]), world[:, j] - world[:, p])
+    return Motion(sk, rotations.quat_canonicalize(local), trans, fps or template.fps, name=name or template.name)
 
 
 def local_to_world_positions(local_positions: jax.Array, root_position: jax.Array, root_rotation: jax.Array):
     """jnp: root-frame joint positions ``(..., J, 3)`` -> world ``(..., J, 3)`` (for world-space losses)."""
-    return R.quat_rotate(root_rotation[..., None, :], local_positions) + root_position[..., None, :]
+    return rotations.quat_rotate(root_rotation[..., None, :], local_positions) + root_position[..., None, :]
 

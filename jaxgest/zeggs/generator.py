@@ -30,8 +30,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from jaxgest.motion import rotations as R
-from jaxgest.zeggs.config import ZeggsConfig
+from jaxgest.motion import rotations
+from jaxgest.zeggs.config import ModelConfig
 
 Carry = tuple[tuple[jax.Array, ...], jax.Array, jax.Array, jax.Array]
 
@@ -56,7 +56,7 @@ class GRULayer(nn.Module):
 
 
 def update_character_state(pose: jax.Array, root_position: jax.Array, root_rotation: jax.Array, *,
-                           cfg: ZeggsConfig, pose_mean: jax.Array, pose_std: jax.Array):
+                           cfg: ModelConfig, pose_mean: jax.Array, pose_std: jax.Array):
     """Integrate the root: denormalise the predicted root velocities and step the root transform.
 
     pose ``(batch, P)`` normalised prediction of frame t; root_position ``(batch, 3)``, root_rotation
@@ -70,12 +70,12 @@ def update_character_state(pose: jax.Array, root_position: jax.Array, root_rotat
     vel = pose[:, lay.root_velocity] * pose_std[None, lay.root_velocity] + pose_mean[None, lay.root_velocity]
     ang = pose[:, lay.root_angular_velocity] * pose_std[None, lay.root_angular_velocity] \
         + pose_mean[None, lay.root_angular_velocity]
-    rot = R.quat_normalize(R.quat_mul(R.expmap_to_quat(R.quat_rotate(root_rotation, ang) * dt), root_rotation))
-    pos = root_position + R.quat_rotate(rot, vel) * dt
+    rot = rotations.quat_normalize(rotations.quat_mul(rotations.expmap_to_quat(rotations.quat_rotate(root_rotation, ang) * dt), root_rotation))
+    pos = root_position + rotations.quat_rotate(rot, vel) * dt
     return pos, rot
 
 
-def input_scale(cfg: ZeggsConfig, pose_mean: jax.Array, pose_std: jax.Array) -> jax.Array:
+def input_scale(cfg: ModelConfig, pose_mean: jax.Array, pose_std: jax.Array) -> jax.Array:
     """Per-channel factor ``(P,)`` from the per-channel (output) normalisation to the input normalisation.
 
     Inputs (style clips, the generator's pose state) are normalised as the authors do: per-channel mean,
@@ -104,7 +104,7 @@ def input_scale(cfg: ZeggsConfig, pose_mean: jax.Array, pose_std: jax.Array) -> 
 
 def local_facing(facing: jax.Array, root_rotation: jax.Array) -> jax.Array:
     """World target facing direction ``(batch, 3)`` expressed in the root frame (``q^-1 f``)."""
-    return R.quat_rotate(R.quat_inv(root_rotation), facing)
+    return rotations.quat_rotate(rotations.quat_inv(root_rotation), facing)
 
 
 class HiddenStateInitializer(nn.Module):
@@ -113,7 +113,7 @@ class HiddenStateInitializer(nn.Module):
     References: Ghorbani et al. 2023, §3.3, §4.2 (3 linear layers with ELU, hidden size 1024).
     """
 
-    cfg: ZeggsConfig
+    cfg: ModelConfig
 
     @nn.compact
     def __call__(self, pose0: jax.Array, facing0: jax.Array, style: jax.Array) -> tuple[jax.Array, ...]:
@@ -133,7 +133,7 @@ class RecurrentDecoder(nn.RNNCellBase):
     References: Ghorbani et al. 2023, §3.3 (Fig. 4).
     """
 
-    cfg: ZeggsConfig
+    cfg: ModelConfig
 
     @nn.compact
     def __call__(self, carry: Carry, inputs: tuple[jax.Array, jax.Array], consts: tuple[jax.Array, ...]):
@@ -161,7 +161,7 @@ class RecurrentDecoder(nn.RNNCellBase):
         return 1
 
 
-def _prepare(cfg: ZeggsConfig, pose0, root_position0, root_rotation0, facing, speech, style, pose_mean, pose_std):
+def _prepare(cfg: ModelConfig, pose0, root_position0, root_rotation0, facing, speech, style, pose_mean, pose_std):
     b, T, _ = speech.shape
     chex.assert_shape(pose0, (b, cfg.pose_dim))
     chex.assert_shape(speech, (b, T, cfg.speech_embedding))
@@ -195,7 +195,7 @@ class Generator(nn.Module):
     References: Ghorbani et al. 2023, §3.3.
     """
 
-    cfg: ZeggsConfig
+    cfg: ModelConfig
 
     def setup(self):
         self.initializer = HiddenStateInitializer(self.cfg, name="initializer")
@@ -219,7 +219,7 @@ class Generator(nn.Module):
         return out
 
 
-def generate_loop_reference(cfg: ZeggsConfig, params, pose0, root_position0, root_rotation0, facing, speech,
+def generate_loop_reference(cfg: ModelConfig, params, pose0, root_position0, root_rotation0, facing, speech,
                             style, pose_mean=None, pose_std=None) -> dict[str, Any]:
     """The generator as a slow Python loop over frames with the same ``params`` (tests only)."""
     style, consts = _prepare(cfg, pose0, root_position0, root_rotation0, facing, speech, style,

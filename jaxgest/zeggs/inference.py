@@ -1,19 +1,21 @@
 """ZeroEGGS generation: speech + style example clip(s) -> gestures (zero-shot), blending, PCA edits, seeds.
 
-``ZeggsModel.generate(audio, styles, weights=None, seed=0, temperature=1.0, pca_edits=None) -> Motion``:
+``TrainedZeggs.generate(audio, styles, weights=None, seed=0, temperature=1.0, pca_edits=None) -> Motion``
+(:func:`load_model` reads a workdir through :mod:`jaxgest.zeggs.workdir`):
 
 1. speech features of the audio at the model rate, normalised with the training statistics;
-2. each style clip is brought to the training rig (directly when it is the same rig, otherwise through the
-   21-joint body joint maps), resampled to the model rate, its pose features normalised and encoded by the
-   style encoder (posterior mean and log-variance), then sampled with ``temperature`` (one key per clip,
-   ``fold_in(PRNGKey(seed), i)``);
+2. each style clip is brought to the training rig at the model rate (:func:`jaxgest.motion.retarget.to_rig`:
+   itself on the same rig, otherwise through the 21-joint body joint maps with the feet on the floor), its
+   pose features normalised and encoded by the style encoder (posterior mean and log-variance), then
+   sampled with ``temperature`` (one key per clip, ``fold_in(key(seed), i)``);
 3. blending: ``e = sum_i w_i e_i`` with the weights as given (one per clip, finite; default ``1 / n``
    each), so weights (2, 0) give exactly ``2 e_1`` -- the paper scales embeddings as well as mixing them;
    ``normalize_weights=True`` divides by ``sum_i w_i`` instead (then the sum must be positive);
 4. optional PCA edits of ``e`` (``workdir/pca.json``, see :mod:`jaxgest.zeggs.pca`);
 5. the generator runs autoregressively from the first style frame's pose, facing +Z, for
-   ``round(duration * model fps)`` frames; features become a Motion on the training rig, then it is mapped
-   to the first style clip's rig and resampled to its frame rate with ``round(duration * fps)`` frames.
+   ``round(duration * model fps)`` frames; features become a Motion on the training rig, then it is put on
+   the first style clip's rig (``to_rig`` again, feet on the floor when the rig differs) at its frame rate
+   with ``round(duration * fps)`` frames.
 
 References: Ghorbani et al. 2023, §3 (inference from an example clip), §5.1 (zero-shot), §5.2.1
 (blending by linear interpolation of embeddings), §5.2.2 (PCA control).
@@ -21,7 +23,6 @@ References: Ghorbani et al. 2023, §3 (inference from an example clip), §5.1 (z
 
 from __future__ import annotations
 
-import functools
 import pathlib
 from typing import Optional, Sequence
 
@@ -30,26 +31,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgest.errors import DataError, JaxgestError
-from jaxgest.motion import body as B
-from jaxgest.motion.datasets import fit_frames, resample_motion
+from jaxgest.motion.retarget import to_rig
 from jaxgest.motion.skeleton import Motion
-from jaxgest.zeggs import features as Fe
+from jaxgest.zeggs import features
 from jaxgest.zeggs.generator import input_scale
-from jaxgest.zeggs.steps import ZeggsModel
+from jaxgest.zeggs.model import apply_fns
 from jaxgest.zeggs.style_encoder import sample_style
-
-MIN_STYLE_SECONDS = 0.5  # the shortest style example accepted (frames at the model rate below this are too few)
-
-
-# Config fields added after models were trained with the old behaviour: a workdir whose config.json lacks
-# one was trained with this value (the dataclass default is the new behaviour).
-LEGACY_DEFAULTS = {"loudness": False, "input_norm": "channel"}
-
-
-def legacy_config(cfg, stored: dict):
-    """``cfg`` with the old behaviour of every field missing from a workdir's stored config dict."""
-    missing = {k: v for k, v in LEGACY_DEFAULTS.items() if k not in stored}
-    return cfg.replace(**missing) if missing else cfg
+from jaxgest.zeggs.workdir import TrainedWorkdir, load_workdir
 
 
 def validate_weights(weights, count: int, *, normalize: bool = False) -> np.ndarray:
@@ -72,83 +60,83 @@ def validate_weights(weights, count: int, *, normalize: bool = False) -> np.ndar
     return w
 
 
-def to_rig(motion: Motion, reference: Motion) -> Motion:
-    """``motion`` on ``reference``'s rig: itself when the rigs match, else retargeted via the body maps."""
-    if motion.skeleton.names == reference.skeleton.names:
-        return motion
-    body = B.retarget_to_body(motion)
-    template = reference.replace(rotations=reference.rotations[:1], translations=reference.translations[:1])
-    return B.retarget_from_body(body, template)
+class TrainedZeggs:
+    """A trained ZeroEGGS model loaded from a workdir (see :func:`load_model`).
 
+    Attributes: ``cfg`` (:class:`jaxgest.zeggs.config.Config`), ``params``, ``pose_stats``,
+    ``speech_stats``, ``reference`` (the training rig), ``meta`` (config.json), ``step`` (the checkpoint
+    step), ``pose_mean`` / ``pose_std`` (device arrays) and ``fns`` (its jitted functions, compiled on first
+    use with ``cfg.inference.compiler_options``; they live as long as this object).
+    """
 
-class ZeggsModel_:
-    """A trained ZeroEGGS model loaded from a workdir (see :func:`load_model`)."""
+    def __init__(self, loaded: TrainedWorkdir, workdir=None):
+        self.workdir = pathlib.Path(workdir) if workdir is not None else None
+        self.cfg, self.meta, self.step = loaded.cfg, loaded.meta, loaded.step
+        self.pose_stats, self.speech_stats, self.reference = loaded.pose_stats, loaded.speech_stats, loaded.reference
+        self.params = jax.tree_util.tree_map(jnp.asarray, loaded.params)
+        self.pose_mean = jnp.asarray(self.pose_stats.mean, jnp.float32)
+        self.pose_std = jnp.asarray(self.pose_stats.std, jnp.float32)
+        self.input_scale = input_scale(self.cfg.model, self.pose_mean, self.pose_std)  # inputs: one std per group
+        self.fns = apply_fns(self.cfg.model, self.cfg.inference.compiler_options)
 
-    def __init__(self, workdir):
-        from jaxgest.zeggs.train import load_workdir
-
-        self.workdir = pathlib.Path(workdir)
-        (self.cfg, params, self.pose_stats, self.speech_stats, self.reference, self.meta) = load_workdir(workdir)
-        self.cfg = legacy_config(self.cfg, self.meta["config"])
-        self.params = jax.tree_util.tree_map(jnp.asarray, params)
-        self._mean = jnp.asarray(self.pose_stats.mean, jnp.float32)
-        self._std = jnp.asarray(self.pose_stats.std, jnp.float32)
-        self._in_scale = input_scale(self.cfg, self._mean, self._std)  # inputs: one std per group
-        self._fns = _jitted(self.cfg)
-
-    def _encode_style(self, params, style, mask):
+    def encode_style(self, params, style, mask):
         """Style posterior of ``(b, S, P)`` clips; lengths padded (masked) to a bucket: few compilations."""
         S = style.shape[1]
         L = bucket_length(S)
         style = jnp.pad(jnp.asarray(style), ((0, 0), (0, L - S), (0, 0)))
         mask = jnp.pad(jnp.asarray(mask, bool), ((0, 0), (0, L - S)))
-        return self._fns["encode_style"](params, style, mask)
+        return self.fns["encode_style"](params, style, mask)
 
-    def _encode_speech(self, params, speech):
-        return self._fns["encode_speech"](params, speech)
+    def encode_speech(self, params, speech):
+        """Speech embeddings ``(b, F, D_S)`` of normalised speech features ``(b, F, 81)``."""
+        return self.fns["encode_speech"](params, speech)
 
-    def _generate(self, params, s_emb, e, y0, r0, q0, f, mean, std):
+    def run_generator(self, params, s_emb, e, y0, r0, q0, f, mean, std):
         """The generator over ``s_emb (b, F, D_S)``; F padded to a bucket (the generator is causal: frames
         after F do not change frames before it) and the output cut back to F frames."""
         F = s_emb.shape[1]
         L = bucket_length(F)
         s_emb = jnp.pad(s_emb, ((0, 0), (0, L - F), (0, 0)))
-        out = self._fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
+        out = self.fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
         return {k: v[:, :F] for k, v in out.items()}
 
     # -- pieces ------------------------------------------------------------------------------------------
     def style_features(self, style: Motion) -> np.ndarray:
         """Pose features ``(F, P)`` of a style clip on the training rig at the model rate, normalised as the
-        style encoder's input (per-channel mean, one std per group: ``cfg.input_norm``)."""
-        return (self.pose_features(style) * np.asarray(self._in_scale)[None]).astype(np.float32)
+        style encoder's input (per-channel mean, one std per group: ``cfg.model.input_norm``)."""
+        return (self.pose_features(style) * np.asarray(self.input_scale)[None]).astype(np.float32)
 
     def pose_features(self, style: Motion) -> np.ndarray:
         """Pose features ``(F, P)`` of a clip on the training rig at the model rate, normalised per channel
         (the generator's output normalisation, in which it takes its initial pose)."""
+        model, min_seconds = self.cfg.model, self.cfg.inference.min_style_seconds
         try:
-            m = resample_motion(to_rig(style, self.reference), self.cfg.fps)
+            m = to_rig(style, self.reference, fps=model.fps)
         except JaxgestError as e:  # e.g. a rig that matches no joint map: name the clip
             raise type(e)(f"{style.name or 'style clip'}: {e}") from None
-        if m.num_frames < max(self.cfg.style_min_frames, int(MIN_STYLE_SECONDS * self.cfg.fps)):
+        if m.num_frames < max(model.style_min_frames, int(min_seconds * model.fps)):
             raise DataError(f"{style.name or 'style clip'}: {style.duration:.2f} s is too short for a style "
-                            f"example (at least {MIN_STYLE_SECONDS} s)")
-        return self.pose_stats.normalize(Fe.extract_features(m)["features"]).astype(np.float32)
+                            f"example (at least {min_seconds} s)")
+        return self.pose_stats.normalize(features.extract_features(m)["features"]).astype(np.float32)
 
     def style_posterior(self, style: Motion):
         """``(mu, logvar)`` each ``(D_e,)`` of one style clip."""
         x = self.style_features(style)
-        mu, logvar = self._encode_style(self.params, jnp.asarray(x)[None], jnp.ones((1, len(x)), bool))
+        mu, logvar = self.encode_style(self.params, jnp.asarray(x)[None], jnp.ones((1, len(x)), bool))
         return np.asarray(mu[0]), np.asarray(logvar[0])
 
-    def style_embedding(self, styles: Sequence[Motion], *, weights=None, seed: int = 0, temperature: float = 1.0,
+    def style_embedding(self, styles: Sequence[Motion], *, weights=None, seed: int = 0,
+                        temperature: Optional[float] = None,
                         pca_edits: Optional[dict] = None, normalize_weights: bool = False) -> np.ndarray:
-        """The blended (``sum_i w_i e_i``; PCA-edited) style embedding ``(D_e,)``."""
+        """The blended (``sum_i w_i e_i``; PCA-edited) style embedding ``(D_e,)`` (``temperature`` None:
+        ``cfg.inference.temperature``)."""
+        temperature = self.cfg.inference.temperature if temperature is None else temperature
         if not styles:
             raise JaxgestError("at least one style clip is needed")
         w = validate_weights(weights, len(styles), normalize=normalize_weights)
         if not np.isfinite(temperature) or temperature < 0:
             raise JaxgestError(f"temperature must be finite and >= 0, got {temperature}")
-        key = jax.random.PRNGKey(seed)
+        key = jax.random.key(seed)
         es = []
         for i, s in enumerate(styles):
             mu, logvar = self.style_posterior(s)
@@ -159,6 +147,8 @@ class ZeggsModel_:
         if pca_edits:
             from jaxgest.zeggs.pca import StylePCA
 
+            if self.workdir is None:
+                raise JaxgestError("PCA edits need the model's workdir (its pca.json)")
             e = StylePCA.load(self.workdir / "pca.json").edit(e, pca_edits)
         return e.astype(np.float32)
 
@@ -173,14 +163,15 @@ class ZeggsModel_:
             if sr is None:
                 raise JaxgestError("an audio array needs its sample rate")
         duration = len(y) / float(sr)
-        feats = speech_features(y, sr=sr, fps=self.cfg.fps, loudness=self.cfg.loudness)
+        feats = speech_features(y, sr=sr, fps=self.cfg.model.fps, loudness=self.cfg.model.loudness)
         if len(feats) < 2:
             raise DataError(f"{audio if isinstance(audio, (str, pathlib.Path)) else 'audio'}: "
                             f"{duration:.3f} s of audio is too short to generate from")
         return self.speech_stats.normalize(feats).astype(np.float32), duration
 
     # -- generation --------------------------------------------------------------------------------------
-    def generate(self, audio, styles: Sequence[Motion], *, weights=None, seed: int = 0, temperature: float = 1.0,
+    def generate(self, audio, styles: Sequence[Motion], *, weights=None, seed: int = 0,
+                 temperature: Optional[float] = None,
                  pca_edits: Optional[dict] = None, sr: Optional[int] = None, name: str = "generated",
                  normalize_weights: bool = False) -> Motion:
         """Gestures for ``audio`` in the (blended) style of ``styles``; a Motion on ``styles[0]``'s rig."""
@@ -190,26 +181,20 @@ class ZeggsModel_:
         speech, duration = self.speech(audio, sr=sr)
         first = self.pose_features(styles[0])
         F = speech.shape[0]
-        s_emb = self._encode_speech(self.params, jnp.asarray(speech)[None])
+        s_emb = self.encode_speech(self.params, jnp.asarray(speech)[None])
         q0 = jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32)
-        out = self._generate(self.params, s_emb, jnp.asarray(e)[None], jnp.asarray(first[:1]),
-                             jnp.zeros((1, 3), jnp.float32), q0, jnp.asarray([[0.0, 0.0, 1.0]], jnp.float32),
-                             self._mean, self._std)
+        out = self.run_generator(self.params, s_emb, jnp.asarray(e)[None], jnp.asarray(first[:1]),
+                                 jnp.zeros((1, 3), jnp.float32), q0, jnp.asarray([[0.0, 0.0, 1.0]], jnp.float32),
+                                 self.pose_mean, self.pose_std)
         pose = self.pose_stats.denormalize(np.asarray(out["pose"][0], np.float64))
         root_p = np.asarray(out["root_position"][0], np.float64)
         root_q = np.asarray(out["root_rotation"][0], np.float64)
+        fps = self.cfg.model.fps
         template = self.reference.replace(rotations=np.repeat(self.reference.rotations[:1], F, 0),
-                                          translations=np.repeat(self.reference.translations[:1], F, 0),
-                                          fps=self.cfg.fps)
-        motion = Fe.features_to_motion(pose, template, root_p, root_q, fps=self.cfg.fps, name=name)
+                                          translations=np.repeat(self.reference.translations[:1], F, 0), fps=fps)
+        motion = features.features_to_motion(pose, template, root_p, root_q, fps=fps, name=name)
         target = styles[0]
-        if target.skeleton.names != motion.skeleton.names:
-            body = B.retarget_to_body(motion)
-            tmpl = target.replace(rotations=target.rotations[:1], translations=target.translations[:1])
-            motion = B.retarget_from_body(body, tmpl).replace(name=name)
-        out_frames = max(1, int(round(duration * target.fps)))
-        motion = resample_motion(motion, target.fps)
-        return fit_frames(motion, out_frames)
+        return to_rig(motion, target, fps=target.fps, frames=max(1, int(round(duration * target.fps))))
 
 
 def bucket_length(n: int, smallest: int = 64) -> int:
@@ -221,37 +206,7 @@ def bucket_length(n: int, smallest: int = 64) -> int:
     return L
 
 
-@functools.lru_cache(maxsize=8)
-def _jitted(cfg) -> dict:
-    """The jitted inference functions of a config (shared by every workdir with that config)."""
-    model = ZeggsModel(cfg)
-    opts = cfg.compiler_options
-    return {
-        "encode_style": jax.jit(lambda p, s, m: model.apply({"params": p}, s, m, method=ZeggsModel.encode_style),
-                                compiler_options=opts),
-        "encode_speech": jax.jit(lambda p, s: model.apply({"params": p}, s, method=ZeggsModel.encode_speech),
-                                 compiler_options=opts),
-        "generate": jax.jit(lambda p, s, e, y0, r0, q0, f, mean, std: model.apply(
-            {"params": p}, s, e, y0, r0, q0, f, mean, std, method=ZeggsModel.generate), compiler_options=opts),
-    }
-
-
-@functools.lru_cache(maxsize=4)
-def _cached(workdir: str, mtime: float) -> ZeggsModel_:
-    return ZeggsModel_(workdir)
-
-
-def load_model(workdir) -> ZeggsModel_:
-    """Load (and cache per workdir and checkpoint time) a trained ZeroEGGS model."""
-    workdir = pathlib.Path(workdir).resolve()
-    marker = workdir / "config.json"
-    return _cached(str(workdir), marker.stat().st_mtime if marker.exists() else 0.0)
-
-
-def generate(audio, styles, *, workdir, weights=None, seed: int = 0, temperature: float = 1.0,
-             pca_edits: Optional[dict] = None, normalize_weights: bool = False) -> Motion:
-    """SPEC §7: ``generate(audio, styles, *, workdir, weights=None, seed=0, temperature=1.0) -> Motion``."""
-    if isinstance(styles, Motion):
-        styles = [styles]
-    return load_model(workdir).generate(audio, styles, weights=weights, seed=seed, temperature=temperature,
-                                        pca_edits=pca_edits, normalize_weights=normalize_weights)
+def load_model(workdir) -> TrainedZeggs:
+    """The trained ZeroEGGS model of ``workdir`` (read now: no cache here; see
+    :class:`jaxgest.zeggs.api.ModelCache` for one keyed on the checkpoint step)."""
+    return TrainedZeggs(load_workdir(workdir), workdir)

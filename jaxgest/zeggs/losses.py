@@ -10,7 +10,7 @@ root; velocities are world velocities expressed in the root frame (as ``extract_
 World quantities apply the root transform: positions ``q p + r``, rotations ``q R`` (both 6-D columns
 rotated), velocities ``q v``. The vertical axis is Y and the world forward +Z (both datasets).
 
-With the rig in the config (``fk_parents`` etc., set from the data by training), the position terms --
+With the rig in the model config (``fk_parents`` etc., set from the data by training), the position terms --
 character frame ("local"), world, and their finite differences -- use joint positions by forward
 kinematics of the predicted rotations (:func:`forward_kinematics`), the motion that is rendered, as the
 authors' train.py computes its character/world terms; the predicted position channels keep a term of their
@@ -18,7 +18,7 @@ own (``predicted_position``) because the generator reads them back.
 
 The paper names the terms (eq. 2) and says each is an MAE "in both local and world spaces" and that the
 weights are chosen empirically; the authors' code adds root position / rotation / velocity terms and
-divides the sum by 18 -- we keep every term, with the code's weights (``ZeggsConfig.w_*``), and say which
+divides the sum by 18 -- we keep every term, with the code's weights (``TrainConfig.w_*``), and say which
 eq. 2 lambda each belongs to. Term functions return per-example means ``(batch,)``; the step reduces.
 
 References: Ghorbani et al. 2023, §4.3, eqs. 1-2; Holden et al. 2020 (finite-difference velocity losses);
@@ -32,8 +32,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.motion import rotations as R
-from jaxgest.zeggs.config import ZeggsConfig
+from jaxgest.motion import rotations
+from jaxgest.zeggs.config import ModelConfig, TrainConfig
 
 WORLD_FORWARD = (0.0, 0.0, 1.0)
 
@@ -49,7 +49,7 @@ def finite_difference(x: jax.Array, fps: float) -> jax.Array:
     return (x[:, 1:] - x[:, :-1]) * fps
 
 
-def split_pose(pose: jax.Array, cfg: ZeggsConfig) -> dict[str, jax.Array]:
+def split_pose(pose: jax.Array, cfg: ModelConfig) -> dict[str, jax.Array]:
     """Denormalised pose features ``(batch, T, P)`` -> named parts (joints on their own axis)."""
     lay, j = cfg.layout, cfg.num_joints
     lead = pose.shape[:-1]
@@ -72,7 +72,7 @@ def to_world(parts: dict[str, jax.Array], root_position: jax.Array, root_rotatio
     """
     rot = parts["rotation"]
     vecs = jnp.stack([parts["position"], rot[..., :3], rot[..., 3:], parts["velocity"], parts["angular"]], -2)
-    m = R.quat_to_matrix(root_rotation)  # (batch, T, 3, 3)
+    m = rotations.quat_to_matrix(root_rotation)  # (batch, T, 3, 3)
     w = jnp.einsum("btij,btkvj->btkvi", m, vecs)
     return {
         "position": w[..., 0, :] + root_position[..., None, :],
@@ -85,10 +85,10 @@ def to_world(parts: dict[str, jax.Array], root_position: jax.Array, root_rotatio
 def facing_direction(root_rotation: jax.Array) -> jax.Array:
     """World facing direction of the character root ``(batch, T, 3)`` (the root's forward axis)."""
     fwd = jnp.broadcast_to(jnp.asarray(WORLD_FORWARD, root_rotation.dtype), root_rotation.shape[:-1] + (3,))
-    return R.quat_rotate(root_rotation, fwd)
+    return rotations.quat_rotate(root_rotation, fwd)
 
 
-def forward_kinematics(rotation: jax.Array, position: jax.Array, cfg: ZeggsConfig) -> jax.Array:
+def forward_kinematics(rotation: jax.Array, position: jax.Array, cfg: ModelConfig) -> jax.Array:
     """Root-frame joint positions ``(..., j, 3)`` by FK of root-frame 6-D rotations ``(..., j, 6)``.
 
     The rig comes from ``cfg.fk_parents`` / ``cfg.fk_offsets``: a joint's position is its parent's plus the
@@ -107,14 +107,14 @@ def forward_kinematics(rotation: jax.Array, position: jax.Array, cfg: ZeggsConfi
     anchor, chain = fk_chain_matrix(cfg.fk_parents, cfg.fk_translated)
     parents = np.maximum(np.asarray(cfg.fk_parents), 0)
     offsets = jnp.asarray(np.asarray(cfg.fk_offsets, np.float32).reshape(j, 3), position.dtype)
-    mats = R.sixd_to_matrix(rotation)  # (..., j, 3, 3), columns = rotated axes
+    mats = rotations.sixd_to_matrix(rotation)  # (..., j, 3, 3), columns = rotated axes
     bones = jnp.einsum("...kab,kb->...ka", mats[..., parents, :, :], offsets)
     return position[..., anchor, :] + jnp.einsum("jk,...kc->...jc", jnp.asarray(chain, position.dtype), bones)
 
 
 def reconstruction_terms(pred_pose: jax.Array, pred_root_position: jax.Array, pred_root_rotation: jax.Array,
                          target_pose: jax.Array, target_root_position: jax.Array,
-                         target_root_rotation: jax.Array, *, cfg: ZeggsConfig) -> dict[str, jax.Array]:
+                         target_root_rotation: jax.Array, *, cfg: ModelConfig) -> dict[str, jax.Array]:
     """Every unweighted MAE term of eq. 2, each ``(batch,)``.
 
     Poses ``(batch, T, P)`` *denormalised*; root positions ``(batch, T, 3)``, rotations ``(batch, T, 4)``.
@@ -154,14 +154,14 @@ def reconstruction_terms(pred_pose: jax.Array, pred_root_position: jax.Array, pr
         "fd_local_rotation": mae(fd(p["rotation"], fps), fd(t["rotation"], fps)),
         "fd_world_rotation": mae(fd(pw["rotation"], fps), fd(tw["rotation"], fps)),
         "root_position": mae(pred_root_position, target_root_position),
-        "root_rotation": mae(R.quat_to_matrix(pred_root_rotation), R.quat_to_matrix(target_root_rotation)),
+        "root_rotation": mae(rotations.quat_to_matrix(pred_root_rotation), rotations.quat_to_matrix(target_root_rotation)),
         "root_velocity": mae(p["root_velocity"], t["root_velocity"]),
         "root_angular": mae(p["root_angular"], t["root_angular"]),
         "facing": mae(facing_direction(pred_root_rotation), facing_direction(target_root_rotation)),
     }
 
 
-def term_weights(cfg: ZeggsConfig) -> dict[str, float]:
+def term_weights(cfg: TrainConfig) -> dict[str, float]:
     """The weight of every reconstruction term (``cfg.w_<term>``)."""
     return {k: float(getattr(cfg, "w_" + k)) for k in (
         "local_position", "world_position", "local_rotation", "world_rotation", "local_velocity",
@@ -191,7 +191,7 @@ def kl_weight(step, *, center: float = 7500.0, growth: float = 0.005, cap: float
     return jnp.minimum(jax.nn.sigmoid(growth * (s - center)), cap)
 
 
-def total_loss(terms: dict[str, jax.Array], kl: jax.Array, kl_w: jax.Array, *, cfg: ZeggsConfig) -> jax.Array:
+def total_loss(terms: dict[str, jax.Array], kl: jax.Array, kl_w: jax.Array, *, cfg: TrainConfig) -> jax.Array:
     """Negative ELBO of eq. 1 per example: ``loss_scale * (sum_k w_k term_k + kl_w * KL)``, ``(batch,)``.
 
     References: Ghorbani et al. 2023, eqs. 1-2.

@@ -15,7 +15,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from jaxgest.zeggs.config import ZeggsConfig
+from jaxgest.zeggs.config import ModelConfig
 
 
 def replicate_pad(x: jax.Array, kernel: int) -> jax.Array:
@@ -30,7 +30,7 @@ class SpeechEncoder(nn.Module):
     References: Ghorbani et al. 2023, §3.1, §4.2.
     """
 
-    cfg: ZeggsConfig
+    cfg: ModelConfig
 
     @nn.compact
     def __call__(self, speech: jax.Array, *, deterministic: bool = True) -> jax.Array:

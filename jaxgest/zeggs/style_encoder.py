@@ -24,7 +24,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from jaxgest.zeggs.config import ZeggsConfig
+from jaxgest.zeggs.config import ModelConfig
 
 
 def sinusoidal_positions(frames: int, dim: int, timescale: float = 10000.0) -> jax.Array:
@@ -85,7 +85,7 @@ class StyleEncoder(nn.Module):
     References: Ghorbani et al. 2023, §3.2, §4.2.
     """
 
-    cfg: ZeggsConfig
+    cfg: ModelConfig
 
     @nn.compact
     def __call__(self, style: jax.Array, mask: Optional[jax.Array] = None, *,

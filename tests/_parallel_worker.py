@@ -202,25 +202,31 @@ def build_zeggs(seed: int, batch_size: int):
     from jaxgest.motion.datasets import load_folder
     from jaxgest.training import TrainState
     from jaxgest.zeggs import data as zdata
-    from jaxgest.zeggs.config import get_config
-    from jaxgest.zeggs.steps import init_params, make_optimizer, make_train_step
+    from jaxgest.zeggs.config import preset
+    from jaxgest.zeggs.model import init_params
+    from jaxgest.zeggs.steps import make_optimizer, make_train_step, pose_stats
 
     if "zeggs" not in _DATA:
         clips = load_folder(_synthetic_dir())
-        cfg0 = get_config("tiny", num_joints=clips[0].motion.skeleton.num_joints)
-        a = cfg0.speed_augmentation
-        _DATA["zeggs"] = zdata.build(clips, fps=cfg0.fps, mirror=cfg0.mirror,
+        cfg0 = preset("tiny", num_joints=clips[0].motion.skeleton.num_joints)
+        a = cfg0.train.speed_augmentation
+        _DATA["zeggs"] = zdata.build(clips, fps=cfg0.model.fps, mirror=cfg0.train.mirror,
                                      speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,)), cfg0
     data, cfg0 = _DATA["zeggs"]
-    cfg = cfg0.replace(batch_size=batch_size)
+    cfg = cfg0.override(batch_size=batch_size)
+    t = cfg.train
     tx = make_optimizer(cfg)
-    params = jax.jit(lambda k: init_params(cfg, k))(jax.random.PRNGKey(seed))
+    params = jax.jit(lambda k: init_params(cfg.model, k))(jax.random.PRNGKey(seed))
     state = TrainState.create(apply_fn=None, params=params, tx=tx).replace(step=jnp.asarray(0, jnp.int32))
-    step = make_train_step(cfg, tx, pose_mean=data.pose_stats.mean, pose_std=data.pose_stats.std)
+    stats = pose_stats(cfg.model, data.pose_stats.mean, data.pose_stats.std)
+    train_step = make_train_step(cfg)
+
+    def step(state, batch, key):
+        return train_step(state, batch, key, stats)
 
     def batch_fn(i):
-        return data.batch(i, seed=seed, batch=cfg.batch_size, window=cfg.window,
-                          style_min=cfg.style_window_min, style_max=cfg.style_window_max)
+        return data.batch(i, seed=seed, batch=t.batch_size, window=t.window,
+                          style_min=t.style_window_min, style_max=t.style_window_max)
 
     return state, step, batch_fn
 

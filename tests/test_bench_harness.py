@@ -233,9 +233,9 @@ def test_numpy_reference_matches_the_jax_transfer():
 @pytest.fixture(scope="module")
 def zeggs_tiny():
     from benchmarks.cases import zeggs as Z
-    from jaxgest.zeggs.config import get_config
+    from jaxgest.zeggs.config import preset
 
-    cfg = get_config("tiny")
+    cfg = preset("tiny").model
     params = Z.random_params(cfg, seed=1)
     inputs = Z.generator_inputs(cfg, 2, 12, seed=1)
     out = jax.jit(Z._generate_fn(cfg))(params, *inputs)
@@ -243,7 +243,7 @@ def zeggs_tiny():
 
 
 def test_zeggs_random_params_have_the_init_shapes(zeggs_tiny):
-    from jaxgest.zeggs.steps import init_params
+    from jaxgest.zeggs.model import init_params
 
     cfg, params, _, _ = zeggs_tiny
     shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))

@@ -44,9 +44,9 @@ def clips(trained):
 def with_pca(trained):
     """The trained workdir with a PCA of its style embeddings (what `jaxgest zeggs pca` fits)."""
     from jaxgest.motion.datasets import load_folder
-    from jaxgest.zeggs.evaluate import style_windows
     from jaxgest.zeggs.inference import load_model
     from jaxgest.zeggs.pca import fit_pca
+    from jaxgest.zeggs.probes import style_windows
 
     data, work, _ = trained
     model = load_model(work)
@@ -78,8 +78,12 @@ def test_training_writes_everything_and_resumes(trained):
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
     assert [r["step"] for r in lines] == [3, 6] and all(np.isfinite(r["loss"]) for r in lines)
     assert lines[0]["devices"] == 1 and summary["start_step"] == 0
-    again = train(data, work, preset="tiny", steps=8, progress=False, log_every=2, ckpt_every=2)
+    # training and inference settings may change on resume (the checkpoint carries the model config only)
+    again = train(data, work, preset="tiny", steps=8, progress=False, log_every=2, ckpt_every=2,
+                  overrides={"learning_rate": 2e-3, "style_sampling": "overlap", "temperature": 0.5})
     assert again["start_step"] == 6 and np.isfinite(again["final"]["loss"])
+    stored = json.loads((work / "config.json").read_text())["config"]
+    assert stored["train"]["learning_rate"] == 2e-3 and stored["inference"]["temperature"] == 0.5
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
     assert [r["step"] for r in lines][-1] == 8
     with pytest.raises(CheckpointError, match="does not match"):
@@ -117,16 +121,16 @@ def test_padded_lengths_are_exact(trained, clips):
     assert [bucket_length(n) for n in (1, 64, 65, 97, 600)] == [64, 64, 96, 128, 768]
     model = load_model(work)
     x = jnp.asarray(model.style_features(styles[0]))[None, :70]
-    mu, logvar = model._encode_style(model.params, x, jnp.ones((1, 70), bool))  # padded to 96
-    mu0, logvar0 = model._fns["encode_style"](model.params, x, jnp.ones((1, 70), bool))
+    mu, logvar = model.encode_style(model.params, x, jnp.ones((1, 70), bool))  # padded to 96
+    mu0, logvar0 = model.fns["encode_style"](model.params, x, jnp.ones((1, 70), bool))
     np.testing.assert_allclose(mu, mu0, atol=1e-5)
     np.testing.assert_allclose(logvar, logvar0, atol=1e-5)
     speech, _ = model.speech(audio)
-    s = model._encode_speech(model.params, jnp.asarray(speech)[None, :70])
+    s = model.encode_speech(model.params, jnp.asarray(speech)[None, :70])
     args = (mu, x[:, 0], jnp.zeros((1, 3)), jnp.asarray([[1.0, 0, 0, 0]]), jnp.asarray([[0.0, 0, 1]]),
-            model._mean, model._std)
-    padded = model._generate(model.params, s, *args)
-    exact = model._fns["generate"](model.params, s, *args)
+            model.pose_mean, model.pose_std)
+    padded = model.run_generator(model.params, s, *args)
+    exact = model.fns["generate"](model.params, s, *args)
     for k in exact:
         assert padded[k].shape == exact[k].shape
         np.testing.assert_allclose(padded[k], exact[k], atol=1e-5)
@@ -339,32 +343,66 @@ def test_style_example_prefers_another_content_of_the_same_style():
     assert style_example(clip, [other_style, clip]) is clip  # nothing else of this style: the clip itself
 
 
+def _flat_config(cfg) -> dict:
+    """The one flat config dict that earlier versions wrote."""
+    return {"name": cfg.name, **cfg.model.to_dict(), **{k: v for k, v in cfg.train.to_dict().items() if k != "steps"},
+            "temperature": cfg.inference.temperature}
+
+
 def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, clips, tmp_path):
-    """A model trained before loudness normalisation and group input normalisation existed loads (and
-    generates) with unnormalised speech and per-channel inputs, as it was trained."""
+    """A workdir of an earlier version (one flat config dict in config.json and its checkpoints) loads; a model
+    trained before loudness normalisation and group input normalisation existed generates with unnormalised
+    speech and per-channel inputs, as it was trained."""
     import shutil
 
     from jaxgest.zeggs.inference import load_model
 
     _, work, _ = trained
     new = load_model(work).cfg
-    assert new.loudness is True and new.input_norm == "group" and new.fk_parents  # defaults of new models
+    assert new.model.loudness is True and new.model.input_norm == "group" and new.model.fk_parents  # defaults
     old = tmp_path / "old"
     shutil.copytree(work, old)
     new_fields = ("loudness", "input_norm", "fk_parents", "fk_offsets", "fk_translated", "w_predicted_position")
-    for path in [old / "config.json", *old.glob("checkpoints/zeggs/*/meta/metadata")]:  # as an old run wrote
-        meta = json.loads(path.read_text())
-        for k in new_fields:
-            del meta["config"][k]
-        path.write_text(json.dumps(meta))
+    flat = {k: v for k, v in _flat_config(new).items() if k not in new_fields}
+    meta = json.loads((old / "config.json").read_text())
+    (old / "config.json").write_text(json.dumps({**meta, "config": flat}))
+    for path in old.glob("checkpoints/zeggs/*/meta/metadata"):  # as an old run wrote them
+        stored = json.loads(path.read_text())
+        path.write_text(json.dumps({**stored, "config": {"preset": "tiny", **flat}}))
     model = load_model(old)
-    assert model.cfg.loudness is False and model.cfg.input_norm == "channel"
+    assert model.cfg.model.loudness is False and model.cfg.model.input_norm == "channel"
+    assert model.cfg.model.replace(loudness=True, input_norm="group", fk_parents=new.model.fk_parents,
+                                   fk_offsets=new.model.fk_offsets,
+                                   fk_translated=new.model.fk_translated) == new.model
     styles, audio = clips
     assert np.all(np.isfinite(model.generate(audio, styles[:1]).rotations))
 
 
+def test_model_cache_is_keyed_on_the_checkpoint_step(trained, tmp_path):
+    """api.ModelCache reuses a loaded model while the newest checkpoint is the same and loads again when a
+    newer step appears; load_model itself never caches."""
+    import shutil
+
+    from jaxgest.zeggs.api import ModelCache
+    from jaxgest.zeggs.inference import load_model
+
+    _, work, _ = trained
+    copy = tmp_path / "work"
+    shutil.copytree(work, copy)
+    cache = ModelCache(maxsize=1)
+    first = cache.get(copy)
+    assert cache.get(copy) is first and load_model(copy) is not load_model(copy)
+    steps = sorted(int(p.name) for p in (copy / "checkpoints/zeggs").iterdir() if p.name.isdigit())
+    newer = steps[-1] + 10
+    shutil.copytree(copy / f"checkpoints/zeggs/{steps[-1]}", copy / f"checkpoints/zeggs/{newer}")
+    second = cache.get(copy)
+    assert second is not first and second.step == newer and first.step == steps[-1]
+    assert cache.get(copy) is second
+
+
 def test_train_cli_no_loudness_flag_reaches_the_config(monkeypatch):
     from jaxgest.cli import main
+    from jaxgest.motion.synthetic import dataset as synthetic_dataset
     from jaxgest.zeggs import train as ztrain
 
     seen = {}
@@ -374,6 +412,7 @@ def test_train_cli_no_loudness_flag_reaches_the_config(monkeypatch):
         return {"final": {}, "start_step": 1, "steps": 1}
 
     monkeypatch.setattr(ztrain, "train", fake_train)
+    monkeypatch.setattr(synthetic_dataset, "training_folder", lambda data, workdir, progress=True: data)
     assert main(["zeggs", "train", "--workdir", "w", "--no-loudness"]) == 0
     assert seen["overrides"] == {"loudness": False}
     assert main(["zeggs", "train", "--workdir", "w"]) == 0

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from jaxgest.audio import FEATURE_DIM, FeatureStats, load_audio, speech_features
 from jaxgest.errors import AudioError, DataError
 from jaxgest.motion.synthetic import write_dataset
-from jaxgest.zeggs import data as D
+from jaxgest.zeggs import data as zdata
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +64,7 @@ def test_feature_stats_round_trip(tmp_path):
 
 
 def test_sequences_and_batches(synth_dir):
-    data = D.load(synth_dir, fps=60, speeds=(0.9, 1.0, 1.1))
+    data = zdata.load(synth_dir, fps=60, speeds=(0.9, 1.0, 1.1))
     assert len(data.sequences) == 3 * 2 * 3  # clips x (original, mirrored) x speeds
     lengths = {round(s.frames / 10) for s in data.sequences if s.name.endswith("@1")}
     fast = [s for s in data.sequences if s.name.endswith("@1.1")]
@@ -96,21 +96,21 @@ def test_style_window_modes(frames, window, smin, extra, seed):
     rng = np.random.default_rng(seed)
     seqs = _seqs([frames, frames + 7, 300], ["a", "a", "b"], ["x.bvh", "y.bvh", "z.bvh"])
     if frames >= window + smin:  # disjoint: the target lies outside the style window
-        t0, (j, s0, m) = D.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
+        t0, (j, s0, m) = zdata.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
                                         sampling="disjoint")
         assert j == 0 and 0 <= t0 <= frames - window and smin <= m <= smax and 0 <= s0 <= frames - m
         assert s0 + m <= t0 or s0 >= t0 + window
     if frames >= max(window, smin):  # overlap (the paper): the style window contains the target
-        t0, (j, s0, m) = D.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
+        t0, (j, s0, m) = zdata.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
                                         sampling="overlap")
         assert j == 0 and 0 <= s0 <= frames - m and m <= max(smax, window)
         assert (s0 <= t0 and t0 + window <= s0 + m) if m >= window else (t0 <= s0 and s0 + m <= t0 + window)
         # other-clip: another clip of the same style ("y.bvh"), never the target's own clip or another style
-        t0, (j, s0, m) = D.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
+        t0, (j, s0, m) = zdata.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
                                         sampling="other-clip")
         assert j == 1 and smin <= m <= min(smax, frames + 7) and 0 <= s0 <= frames + 7 - m
     # the only clip of its style: other-clip falls back to disjoint
-    t0, (j, s0, m) = D.style_window(seqs, 2, rng, window=window, style_min=smin, style_max=smax,
+    t0, (j, s0, m) = zdata.style_window(seqs, 2, rng, window=window, style_min=smin, style_max=smax,
                                     sampling="other-clip")
     assert j == 2 and (s0 + m <= t0 or s0 >= t0 + window)
 
@@ -126,10 +126,10 @@ def test_batch_sampling_modes(synth_dir, tmp_path):
     bvhs = sorted(synth_dir.glob("*.bvh"))  # relabelled: two clips of style "a", one of style "b"
     (tmp_path / "manifest.csv").write_text("path,content,style,audio\n" + "".join(
         f"{p.resolve()},c{i},{'aab'[i]},{p.with_suffix('.wav').resolve()}\n" for i, p in enumerate(bvhs)))
-    data = D.load(tmp_path, fps=60, speeds=(1.0,))
+    data = zdata.load(tmp_path, fps=60, speeds=(1.0,))
     norms = [data.pose_stats.normalize(s.pose) for s in data.sequences]
     kw = dict(seed=1, batch=6, window=64, style_min=64, style_max=96)
-    for mode in D.SAMPLING_MODES:
+    for mode in zdata.SAMPLING_MODES:
         b = data.batch(2, sampling=mode, **kw)
         for r in range(6):  # locate the target and its style window among the sequences' frames
             target = b["pose"][r]
@@ -162,11 +162,11 @@ def test_folder_without_audio_is_rejected(tmp_path, synth_dir):
     (tmp_path / "manifest.csv").write_text("path,content,style\n" + "".join(
         f"{f.name},c,s\n" for f in sorted(tmp_path.glob("*.bvh"))))
     with pytest.raises(DataError, match="no clip has audio"):
-        D.load(tmp_path, fps=60)
+        zdata.load(tmp_path, fps=60)
 
 
 @pytest.mark.realdata
 def test_real_zeggs_sample_aligns(zeggs_dir):
-    data = D.load(zeggs_dir, fps=30, speeds=(1.0,))
+    data = zdata.load(zeggs_dir, fps=30, speeds=(1.0,))
     s = data.sequences[0]
     assert data.pose_dim == 15 * 75 + 6 and s.frames == 2065  # 68.8 s at 30 fps, audio and motion agree

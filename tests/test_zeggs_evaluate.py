@@ -8,7 +8,7 @@ import types
 import numpy as np
 import pytest
 
-from jaxgest.zeggs import evaluate as E
+from jaxgest.zeggs import probes
 
 CONTENTS = ["c0", "c1", "c2", "c3", "c4"]
 STYLES = ["s0", "s1", "s2", "s3"]
@@ -25,12 +25,12 @@ def _planted_windows(clips, rng, *, style_scale=3.0, content_scale=3.0, windows=
 
 
 def test_mean_se_known_answer():
-    d = E._mean_se([0.2, 0.0, -0.1])  # mean 1/30, sample std sqrt(0.07 / 3)
+    d = probes._mean_se([0.2, 0.0, -0.1])  # mean 1/30, sample std sqrt(0.07 / 3)
     assert d["mean"] == pytest.approx(1 / 30) and d["n"] == 3
     assert d["standard_error"] == pytest.approx(np.sqrt(0.07 / 3) / np.sqrt(3))
     assert d["z"] == pytest.approx(d["mean"] / d["standard_error"])
     assert d["ci95_half_width"] == pytest.approx(1.96 * d["standard_error"])
-    assert E._mean_se([1.0])["z"] is None  # one unit: no standard error
+    assert probes._mean_se([1.0])["z"] is None  # one unit: no standard error
 
 
 def test_grouped_probe_separable_shuffled_and_content_only():
@@ -38,25 +38,25 @@ def test_grouped_probe_separable_shuffled_and_content_only():
     clips = _clips()
     styles, contents = [c.style for c in clips], [c.content for c in clips]
     feats = _planted_windows(clips, rng, style_scale=5.0, content_scale=1.0)
-    r = E.grouped_probe(feats, styles, contents)  # leave-one-content-out
+    r = probes.grouped_probe(feats, styles, contents)  # leave-one-content-out
     assert r["accuracy"] == 1.0 and r["clip_mean"]["ci95_half_width"] == 0.0
     assert r["chance"] == 0.25 and r["folds"] == 5 and r["clips"] == 20 and r["windows"] == 120
     # labels shuffled across clips: no structure to find, so the probe is near chance (1/4)
-    accs = [E.grouped_probe(feats, list(rng.permutation(styles)), contents)["accuracy"] for _ in range(20)]
+    accs = [probes.grouped_probe(feats, list(rng.permutation(styles)), contents)["accuracy"] for _ in range(20)]
     assert abs(np.mean(accs) - 0.25) < 0.1
     # features that only encode the content: leave-one-content-out cannot use them to predict the style
     # (chance), while the content probe (leave-one-style-out) is perfect
     content_only = _planted_windows(clips, rng, style_scale=0.0)
-    assert E.grouped_probe(content_only, styles, contents)["accuracy"] < 0.45
-    assert E.grouped_probe(content_only, contents, styles)["accuracy"] == 1.0
-    assert E.variance_share(content_only, contents) > 0.9 and E.variance_share(content_only, styles) < 0.1
+    assert probes.grouped_probe(content_only, styles, contents)["accuracy"] < 0.45
+    assert probes.grouped_probe(content_only, contents, styles)["accuracy"] == 1.0
+    assert probes.variance_share(content_only, contents) > 0.9 and probes.variance_share(content_only, styles) < 0.1
 
 
 def test_leakage_plan_sources():
     clips = _clips()
     frames = [600] * len(clips)
     T, M = 64, 128
-    plan = E.leakage_plan(clips, frames, window=T, style_len=M, targets_per_clip=3)
+    plan = probes.leakage_plan(clips, frames, window=T, style_len=M, targets_per_clip=3)
     assert len(plan) == 3 * len(clips)
     seen_contents = set()
     for p in plan:
@@ -73,12 +73,12 @@ def test_leakage_plan_sources():
         seen_contents.add((p["clip"], clips[j].content))
     assert len(seen_contents) == 3 * len(clips)  # another content for each of a clip's targets
     # a clip too short for a target plus a disjoint window has no target
-    assert E.leakage_plan(clips[:2], [T + M - 1, 600], window=T, style_len=M)[0]["clip"] == 1
+    assert probes.leakage_plan(clips[:2], [T + M - 1, 600], window=T, style_len=M)[0]["clip"] == 1
 
 
 def _planted_losses(clips, plan, embed, rng):
     """Loss = squared distance of the embedding to the target's true code + target noise (shared by sources)."""
-    losses = {k: [] for k in E.LEAKAGE_SOURCES}
+    losses = {k: [] for k in probes.LEAKAGE_SOURCES}
     for p in plan:
         noise = rng.normal() * 0.5
         truth = embed(clips[p["clip"]], p["t0"])
@@ -91,11 +91,11 @@ def _planted_losses(clips, plan, embed, rng):
 def test_leakage_statistics_on_planted_embeddings():
     rng = np.random.default_rng(1)
     clips = _clips()
-    plan = E.leakage_plan(clips, [600] * len(clips), window=64, style_len=128)
+    plan = probes.leakage_plan(clips, [600] * len(clips), window=64, style_len=128)
     groups = [p["clip"] for p in plan]
     code = {s: rng.normal(size=4) for s in STYLES}
     # an embedding that is a function of the style label: another style hurts, the content does not matter
-    r = E.leakage_statistics(_planted_losses(clips, plan, lambda c, s0: code[c.style], rng), groups)
+    r = probes.leakage_statistics(_planted_losses(clips, plan, lambda c, s0: code[c.style], rng), groups)
     d = r["contrasts"]["other_style - same_style_other_content"]
     assert d["mean"] > 0 and d["z"] >= 3 and r["contrasts"]["zero - same_style_other_content"]["z"] >= 3
     assert r["contrasts"]["same_style_other_content - same_clip_disjoint"]["mean"] == pytest.approx(0, abs=1e-12)
@@ -104,7 +104,7 @@ def test_leakage_statistics_on_planted_embeddings():
     # the same other content, another style is exactly as good as the same style
     ccode = {c: rng.normal(size=4) for c in CONTENTS}
     leak = _planted_losses(clips, plan, lambda c, s0: ccode[c.content] * (1 + s0 / 600), rng)
-    r = E.leakage_statistics(leak, groups)
+    r = probes.leakage_statistics(leak, groups)
     assert r["contrasts"]["other_style - same_style_other_content"]["mean"] == pytest.approx(0, abs=1e-12)
     assert r["contrasts"]["same_clip_disjoint - own_window"]["z"] >= 3
     assert r["mean_loss"]["own_window"] < r["mean_loss"]["same_style_other_content"]

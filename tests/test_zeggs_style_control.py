@@ -79,7 +79,7 @@ def styled(tmp_path_factory):
 
 def windows(model, clips, seconds: float = 2.0):
     """Posterior means, real lean and style labels of non-overlapping windows of every clip."""
-    n = int(seconds * model.cfg.fps)
+    n = int(seconds * model.cfg.model.fps)
     emb, leans, labels = [], [], []
     for (_, style), m in clips.items():
         for s in range(0, m.num_frames - n + 1, n):

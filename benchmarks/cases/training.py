@@ -33,7 +33,8 @@ from jaxgest.tgst import model as TM
 from jaxgest.tgst import steps as TS
 from jaxgest.tgst.config import get_config as tgst_config
 from jaxgest.zeggs import steps as ZS
-from jaxgest.zeggs.config import get_config as zeggs_config
+from jaxgest.zeggs.config import preset as zeggs_config
+from jaxgest.zeggs.model import ZeggsModel
 
 
 @functools.lru_cache(maxsize=None)
@@ -109,18 +110,19 @@ def zeggs_train_case(preset: str, *, quick: bool) -> Case:
 
     cfg = zeggs_config(preset)
     tx = ZS.make_optimizer(cfg)
-    b, f, s = cfg.batch_size, cfg.window, cfg.style_window_max
+    b, f, s = cfg.train.batch_size, cfg.train.window, cfg.train.style_window_max
+    stats = ZS.pose_stats(cfg.model)
 
     def make_args():
-        state = TrainState.create(apply_fn=ZS.ZeggsModel(cfg).apply, params=random_params(cfg), tx=tx)
-        return state, zeggs_batch(cfg, b, f, s), jax.random.PRNGKey(0)
+        state = TrainState.create(apply_fn=ZeggsModel(cfg.model).apply, params=random_params(cfg.model), tx=tx)
+        return state, zeggs_batch(cfg.model, b, f, s), jax.random.key(0), stats
 
     return Case(name=f"train_zeggs_{preset}", batch=b, frames=f,
-                impls=[Impl("jit", jax.jit(ZS.make_train_step(cfg, tx), compiler_options=cfg.compiler_options),
+                impls=[Impl("jit", jax.jit(ZS.make_train_step(cfg), compiler_options=cfg.train.compiler_options),
                             kind="jit")], make_args=make_args,
                 quick=quick, max_repeats_slow=2,
                 note=f"ZEGGS {preset} preset, RAdam step, batch {b} x {f} frames, style clips of {s} frames, "
-                     f"compiler options {cfg.compiler_options}")
+                     f"compiler options {cfg.train.compiler_options}")
 
 
 def cases(quick: bool) -> list:

@@ -31,17 +31,17 @@ import numpy as np
 
 from benchmarks import numpy_zeggs
 from benchmarks.harness import Case, Impl
-from jaxgest.zeggs.config import ZeggsConfig, get_config
-from jaxgest.zeggs.steps import ZeggsModel, init_params
+from jaxgest.zeggs.config import ModelConfig, preset
+from jaxgest.zeggs.model import ZeggsModel, init_params
 
-CFG = get_config("paper")
+CFG = preset("paper").model
 STYLE_FRAMES = 512
 AUDIO_SECONDS = 10.0
 AUDIO_SR = 16000
 CHECK_FRAMES = 8  # generated frames of the equality-check cases (eager JAX is ~15x slower than jit)
 
 
-def random_params(cfg: ZeggsConfig, seed: int = 0) -> dict:
+def random_params(cfg: ModelConfig, seed: int = 0) -> dict:
     """Parameters shaped as ``init_params(cfg)``: LeCun-normal kernels, zero biases, unit LayerNorm scales."""
     shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
     rng = np.random.default_rng(seed)
@@ -60,10 +60,10 @@ def random_params(cfg: ZeggsConfig, seed: int = 0) -> dict:
 
 @functools.lru_cache(maxsize=None)
 def _params(name: str = "paper"):
-    return random_params(get_config(name))
+    return random_params(preset(name).model)
 
 
-def generator_inputs(cfg: ZeggsConfig, batch: int, frames: int, seed: int = 0) -> tuple:
+def generator_inputs(cfg: ModelConfig, batch: int, frames: int, seed: int = 0) -> tuple:
     """``(speech_embedding (b, frames + 1, D_S), style (b, D_e), pose0, root_position0, root_rotation0,
     facing)``: ``frames`` frames are generated after the given frame 0."""
     rng = np.random.default_rng(seed * 7919 + batch * 31 + frames)
@@ -78,7 +78,7 @@ def generator_inputs(cfg: ZeggsConfig, batch: int, frames: int, seed: int = 0) -
     return speech, style, pose0, f32(np.zeros((batch, 3))), f32(q0), f32(facing)
 
 
-def _generate_fn(cfg: ZeggsConfig):
+def _generate_fn(cfg: ModelConfig):
     model = ZeggsModel(cfg)
 
     def generate(params, speech, style, pose0, root_position0, root_rotation0, facing):
@@ -96,7 +96,7 @@ def _eager(f):
     return run
 
 
-def _numpy_generate(cfg: ZeggsConfig):
+def _numpy_generate(cfg: ModelConfig):
     lay = cfg.layout
 
     def run(params, *inputs):
@@ -124,7 +124,7 @@ def generate_case(batch: int, frames: int, *, name: str, with_eager: bool = Fals
     )
 
 
-def _style_fn(cfg: ZeggsConfig):
+def _style_fn(cfg: ModelConfig):
     model = ZeggsModel(cfg)
 
     def encode_style(params, style, mask):
@@ -148,7 +148,7 @@ def style_case(batch: int, frames: int = STYLE_FRAMES, *, quick: bool = True) ->
                      "per pose = per style frame")
 
 
-def _speech_fn(cfg: ZeggsConfig):
+def _speech_fn(cfg: ModelConfig):
     model = ZeggsModel(cfg)
 
     def encode_speech(params, speech):

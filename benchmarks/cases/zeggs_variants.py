@@ -35,7 +35,7 @@ import jax.numpy as jnp
 
 from benchmarks.cases.zeggs import CFG, _generate_fn, _params, generator_inputs
 from benchmarks.harness import Case, Impl
-from jaxgest.zeggs.config import ZeggsConfig
+from jaxgest.zeggs.config import ModelConfig
 from jaxgest.zeggs.generator import HiddenStateInitializer, local_facing, update_character_state
 
 
@@ -53,7 +53,7 @@ def _dot(x, w):
     return jnp.dot(x.astype(w.dtype), w, preferred_element_type=jnp.float32)
 
 
-def make_variant(cfg: ZeggsConfig, *, hoist: bool, fused: bool, unroll: int = 1, weight_dtype=jnp.float32):
+def make_variant(cfg: ModelConfig, *, hoist: bool, fused: bool, unroll: int = 1, weight_dtype=jnp.float32):
     """``generate(params, speech, style, pose0, root_position0, root_rotation0, facing) -> dict``."""
     P = cfg.pose_dim
     n_pf = P + cfg.facing_dim  # per-frame inputs that depend on the recurrence: [pose, local facing]

@@ -42,25 +42,23 @@ def main():
     ap.add_argument("--seed", type=int, default=0, help="training seed (initialisation, batches, dropout)")
     args = ap.parse_args()
 
-    import dataclasses
-
     import jax
 
     from jaxgest.motion.datasets import load_folder
     from jaxgest.motion.synthetic import write_dataset
     from jaxgest.zeggs import data as zdata
-    from jaxgest.zeggs import features as Fe
-    from jaxgest.zeggs.config import ZeggsConfig
-    from jaxgest.zeggs.inference import legacy_config
+    from jaxgest.zeggs import features
+    from jaxgest.zeggs.config import field_names
     from jaxgest.zeggs.steps import loss_terms
-    from jaxgest.zeggs.train import load_workdir, train
+    from jaxgest.zeggs.train import train
+    from jaxgest.zeggs.workdir import load_workdir
 
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for name, seed in (("data", 0), ("data_heldout", 1)):
         if not (out / name / "manifest.csv").is_file():
             write_dataset(out / name, seed=seed, progress=False)
-    fields = {f.name for f in dataclasses.fields(ZeggsConfig)}
+    fields = set().union(*field_names().values())
     overrides = {k: v for k, v in {**COMMON, **VARIANTS[args.variant]}.items() if k in fields}
     skipped = sorted(set(VARIANTS[args.variant]) - fields)
     name = args.variant if args.seed == 0 else f"{args.variant}_s{args.seed}"
@@ -70,20 +68,20 @@ def main():
                     overrides=overrides)
     train_s = time.perf_counter() - t0
 
-    cfg, params, pose_stats, speech_stats, _, meta = load_workdir(work)
-    cfg = legacy_config(cfg, meta["config"])
+    loaded = load_workdir(work)  # flat configs of earlier versions are mapped (LEGACY_DEFAULTS)
+    cfg, params, pose_stats, speech_stats = loaded.cfg, loaded.params, loaded.pose_stats, loaded.speech_stats
     clips = [c for c in load_folder(out / "data_heldout", progress=False) if c.audio is not None]
-    held = zdata.build(clips, fps=cfg.fps, mirror=False, speeds=(1.0,), pose_stats=pose_stats,
-                       speech_stats=speech_stats, loudness=cfg.loudness)
-    score_cfg = cfg.replace(**Fe.fk_fields(clips[0].motion.skeleton))
+    held = zdata.build(clips, fps=cfg.model.fps, mirror=False, speeds=(1.0,), pose_stats=pose_stats,
+                       speech_stats=speech_stats, loudness=cfg.model.loudness)
+    score_cfg = cfg.override(**features.fk_fields(clips[0].motion.skeleton))
     rows = {k: [] for k in TERMS}
     mean, std = np.asarray(pose_stats.mean, np.float32), np.asarray(pose_stats.std, np.float32)
     fn = jax.jit(lambda p, b, k: loss_terms(p, b, k, 10 ** 6, cfg=score_cfg, pose_mean=mean, pose_std=std,
                                             deterministic=True))
     for i in range(args.windows // 16):
-        b = held.batch(i, seed=1234, batch=16, window=cfg.window, style_min=cfg.style_window_min,
-                       style_max=cfg.style_window_max)
-        terms = fn(params, b, jax.random.PRNGKey(i))
+        b = held.batch(i, seed=1234, batch=16, window=cfg.train.window, style_min=cfg.train.style_window_min,
+                       style_max=cfg.train.style_window_max)
+        terms = fn(params, b, jax.random.key(i))
         for k in TERMS:
             rows[k].extend(np.asarray(terms[k], np.float64).tolist())
     res = {"variant": args.variant, "seed": args.seed, "steps": args.steps, "overrides": {k: v for k, v in overrides.items()

@@ -483,9 +483,9 @@ def test_older_layout_without_a_current_field(ctx, capsys, tmp_path, model, fiel
 def test_older_zeggs_layout_without_a_current_field_still_generates(ctx, capsys, tmp_path):
     """ZeroEGGS reads its checkpoint against config.json as stored: a workdir written before a (training-only)
     field existed still generates, with no output on stderr (fields that change inference have legacy values in
-    jaxgest.zeggs.inference.LEGACY_DEFAULTS, tested in test_zeggs_api)."""
+    jaxgest.zeggs.config.LEGACY_DEFAULTS, tested in test_zeggs_model/test_zeggs_api)."""
     work = copy(ctx, "zeggs", tmp_path)
-    _edit_config(work, lambda d: d["config"].pop("style_window_max"))
+    _edit_config(work, lambda d: d["config"]["train"].pop("style_window_max"))
     _edit_meta(work, "zeggs", lambda d: d["config"].pop("style_window_max", None))
     rc, err, _ = run(infer(ctx, "zeggs", work, tmp_path / "o.bvh"), capsys)
     assert rc == 0 and err == "", err

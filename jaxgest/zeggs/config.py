@@ -66,12 +66,28 @@ from jaxgest.zeggs.features import PoseLayout
 SPEECH_DIM = 81  # 80 log-mel bands + log energy (jaxgest.audio.FEATURE_DIM)
 
 
-def _compiler_options(level: Optional[int]) -> Optional[dict]:
-    return None if level is None else {"xla_backend_optimization_level": int(level)}
+class _Part:
+    """What the three config parts share: ``to_dict`` and ``replace``."""
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def replace(self, **kw):
+        return dataclasses.replace(self, **kw)
+
+
+class _Compiled(_Part):
+    """A part with an ``xla_opt_level`` field."""
+
+    @property
+    def compiler_options(self) -> Optional[dict]:
+        """``compiler_options`` for ``jax.jit`` (None: XLA's defaults)."""
+        level = self.xla_opt_level
+        return None if level is None else {"xla_backend_optimization_level": int(level)}
 
 
 @dataclasses.dataclass(frozen=True)
-class ModelConfig:
+class ModelConfig(_Part):
     """What rebuilds the ZeroEGGS networks and interprets their inputs and outputs (stored with checkpoints)."""
 
     # --- data ---------------------------------------------------------------------------------------
@@ -130,15 +146,9 @@ class ModelConfig:
         """Width of the style encoder's FFT block (2 D_e)."""
         return 2 * self.style_embedding
 
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
-
-    def replace(self, **kw) -> "ModelConfig":
-        return dataclasses.replace(self, **kw)
-
 
 @dataclasses.dataclass(frozen=True)
-class TrainConfig:
+class TrainConfig(_Compiled):
     """Losses, KL schedule, optimiser, batches, windows, augmentation, steps and compiler options."""
 
     # --- losses (eqs. 1-2); weights from the authors' code, mapped onto this feature layout ----------
@@ -191,36 +201,14 @@ class TrainConfig:
         if self.style_sampling not in ("overlap", "disjoint", "other-clip"):
             raise ValueError(f"style_sampling must be 'overlap', 'disjoint' or 'other-clip', got {self.style_sampling!r}")
 
-    @property
-    def compiler_options(self) -> Optional[dict]:
-        """``compiler_options`` for ``jax.jit`` (None: XLA's defaults)."""
-        return _compiler_options(self.xla_opt_level)
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
-
-    def replace(self, **kw) -> "TrainConfig":
-        return dataclasses.replace(self, **kw)
-
 
 @dataclasses.dataclass(frozen=True)
-class InferenceConfig:
+class InferenceConfig(_Compiled):
     """Generation settings that do not change the trained model."""
 
     temperature: float = 1.0  # default sampling temperature of the style embedding
     min_style_seconds: float = 0.5  # the shortest style example accepted
     xla_opt_level: Optional[int] = None  # XLA backend optimisation level of the jitted inference functions
-
-    @property
-    def compiler_options(self) -> Optional[dict]:
-        """``compiler_options`` for ``jax.jit`` (None: XLA's defaults)."""
-        return _compiler_options(self.xla_opt_level)
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
-
-    def replace(self, **kw) -> "InferenceConfig":
-        return dataclasses.replace(self, **kw)
 
 
 _PARTS = {"model": ModelConfig, "train": TrainConfig, "inference": InferenceConfig}

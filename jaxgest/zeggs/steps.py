@@ -26,7 +26,7 @@ teacher forcing, KL annealing).
 
 from __future__ import annotations
 
-from typing import Callable, Optional
+from typing import Callable
 
 import chex
 import jax
@@ -39,7 +39,7 @@ from jaxgest.training import make_update_step
 from jaxgest.zeggs import losses
 from jaxgest.zeggs.config import Config, ModelConfig
 from jaxgest.zeggs.generator import input_scale
-from jaxgest.zeggs.model import ZeggsModel, init_params
+from jaxgest.zeggs.model import ZeggsModel
 
 Step = Callable[[TrainState, dict, jax.Array, dict], tuple[TrainState, dict]]
 
@@ -57,13 +57,6 @@ def learning_rate_schedule(cfg: Config) -> optax.Schedule:
     t = cfg.train
     return optax.exponential_decay(t.learning_rate, transition_steps=t.lr_decay_steps, decay_rate=t.lr_decay,
                                    staircase=True)
-
-
-def create_train_state(cfg: Config, key: jax.Array, tx: Optional[optax.GradientTransformation] = None) -> TrainState:
-    """TrainState with fresh parameters (``apply_fn = ZeggsModel(cfg.model).apply``; default ``tx``:
-    :func:`make_optimizer`)."""
-    return TrainState.create(apply_fn=ZeggsModel(cfg.model).apply, params=init_params(cfg.model, key),
-                             tx=make_optimizer(cfg) if tx is None else tx)
 
 
 def pose_stats(cfg: ModelConfig, mean=None, std=None) -> dict[str, jax.Array]:

@@ -376,6 +376,11 @@ def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, cli
                                    fk_translated=new.model.fk_translated) == new.model
     styles, audio = clips
     assert np.all(np.isfinite(model.generate(audio, styles[:1]).rotations))
+    # its checkpoints are compared field by field: resuming with today's defaults names what differs
+    from jaxgest.zeggs.train import train
+
+    with pytest.raises(CheckpointError, match=r"does not match the requested model \(.*input_norm: 'channel' -> 'group'"):
+        train(trained[0], old, preset="tiny", steps=8, progress=False)
 
 
 def test_model_cache_is_keyed_on_the_checkpoint_step(trained, tmp_path):

@@ -18,6 +18,7 @@ training or inference setting may change between a run and its resumption. Workd
 from __future__ import annotations
 
 import dataclasses
+import json
 import pathlib
 from typing import Any, Mapping, Optional
 
@@ -50,22 +51,31 @@ def stored_checkpoint_config(config: Mapping[str, Any]) -> dict:
         return dict(config)
     flat = {k: v for k, v in config.items() if k != "preset"}
     try:
-        return checkpoint_config(Config.from_dict(flat).model)
+        return json.loads(json.dumps(checkpoint_config(Config.from_dict(flat).model)))  # lists, as stored
     except (TypeError, ValueError):
         return dict(config)  # left to Checkpointer.check_meta to report
 
 
+class ZeggsCheckpointer(Checkpointer):
+    """The :class:`jaxgest.training.Checkpointer` of a ZeroEGGS workdir: a stored meta item is compared as
+    :func:`stored_checkpoint_config` (so checkpoints of earlier versions, with one flat config, are checked
+    field by field against the model config instead of refused as another layout)."""
+
+    def check_meta(self, stored: Optional[Mapping]) -> None:
+        if stored is not None:
+            stored = {**stored, "config": stored_checkpoint_config(stored.get("config") or {})}
+        super().check_meta(stored)
+
+
 def open_checkpoints(workdir, cfg: Config, skeleton: Optional[str], *, read_only: bool = False) -> Checkpointer:
-    """The workdir's :class:`Checkpointer` for this model config and rig."""
-    return Checkpointer(workdir, kind=KIND, config=checkpoint_config(cfg.model), skeleton=skeleton,
-                        subdir=CKPT_SUBDIR, read_only=read_only, ignore=())
+    """The workdir's checkpointer for this model config and rig (:class:`ZeggsCheckpointer`)."""
+    return ZeggsCheckpointer(workdir, kind=KIND, config=checkpoint_config(cfg.model), skeleton=skeleton,
+                             subdir=CKPT_SUBDIR, read_only=read_only, ignore=())
 
 
 def check_resumable(ckpt: Checkpointer) -> None:
     """Raise :class:`CheckpointError` when the newest checkpoint's meta does not match ``ckpt``'s model."""
-    stored = ckpt.stored_meta()
-    if stored is not None:
-        ckpt.check_meta({**stored, "config": stored_checkpoint_config(stored.get("config") or {})})
+    ckpt.check_meta(ckpt.stored_meta())
 
 
 def write_config(workdir, cfg: Config, *, preset: str, steps: int, seed: int, data, skeleton, info: Mapping) -> None:

@@ -379,7 +379,8 @@ def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, cli
     # its checkpoints are compared field by field: resuming with today's defaults names what differs
     from jaxgest.zeggs.train import train
 
-    with pytest.raises(CheckpointError, match=r"does not match the requested model \(.*input_norm: 'channel' -> 'group'"):
+    differs = r"does not match the requested model \(.*input_norm: 'channel' -> 'group'"
+    with pytest.raises(CheckpointError, match=differs):
         train(trained[0], old, preset="tiny", steps=8, progress=False)
 
 

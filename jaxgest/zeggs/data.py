@@ -193,7 +193,8 @@ def target_arrays(s: AlignedSequence, t0: int, window: int, pose_stats: NormStat
     inv0 = rotations.quat_inv(s.root_rotation[t0])
     return {"speech": speech_stats.normalize(s.speech[sl]), "pose": pose_stats.normalize(s.pose[sl]),
             "root_position": rotations.quat_rotate(inv0, s.root_position[sl] - s.root_position[t0]),
-            "root_rotation": rotations.quat_mul(inv0, s.root_rotation[sl]), "facing": rotations.quat_rotate(inv0, s.facing)}
+            "root_rotation": rotations.quat_mul(inv0, s.root_rotation[sl]),
+            "facing": rotations.quat_rotate(inv0, s.facing)}
 
 
 def style_window(sequences, i: int, rng, *, window: int, style_min: int, style_max: int,

@@ -294,7 +294,8 @@ def integrate_root(root_vel: np.ndarray, root_ang: np.ndarray, fps: float, start
     pos = np.zeros((F, 3))
     for t in range(F):
         if t > 0:
-            q = rotations.quat_normalize(rotations.quat_mul(rotations.expmap_to_quat(rotations.quat_rotate(q, root_ang[t]) / fps), q))
+            turn = rotations.expmap_to_quat(rotations.quat_rotate(q, root_ang[t]) / fps)
+            q = rotations.quat_normalize(rotations.quat_mul(turn, q))
             p = p + rotations.quat_rotate(q, root_vel[t]) / fps
         pos[t], rot[t] = p, q
     return pos, rot

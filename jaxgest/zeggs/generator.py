@@ -70,7 +70,8 @@ def update_character_state(pose: jax.Array, root_position: jax.Array, root_rotat
     vel = pose[:, lay.root_velocity] * pose_std[None, lay.root_velocity] + pose_mean[None, lay.root_velocity]
     ang = pose[:, lay.root_angular_velocity] * pose_std[None, lay.root_angular_velocity] \
         + pose_mean[None, lay.root_angular_velocity]
-    rot = rotations.quat_normalize(rotations.quat_mul(rotations.expmap_to_quat(rotations.quat_rotate(root_rotation, ang) * dt), root_rotation))
+    turn = rotations.expmap_to_quat(rotations.quat_rotate(root_rotation, ang) * dt)
+    rot = rotations.quat_normalize(rotations.quat_mul(turn, root_rotation))
     pos = root_position + rotations.quat_rotate(rot, vel) * dt
     return pos, rot
 

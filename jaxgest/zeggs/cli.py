@@ -154,9 +154,9 @@ def _pca(args) -> int:
     import numpy as np
 
     from jaxgest.motion.datasets import load_folder
-    from jaxgest.zeggs.probes import style_windows
     from jaxgest.zeggs.inference import load_model
     from jaxgest.zeggs.pca import fit_pca
+    from jaxgest.zeggs.probes import style_windows
 
     model = load_model(args.workdir)
     clips = load_folder(args.data)

@@ -6,6 +6,9 @@ every ``OSError`` no module handled (a full or read-only disk, ...), becomes one
 status 2. Every command that reads a workdir gets ``--strict`` (refuse an unreadable checkpoint instead of
 falling back to an older one).
 
+The command owns its process, so it (and only it) installs the process-wide filter of asyncio's "Event loop
+is closed" noise (:func:`jaxgest.checkpoint.mute_closed_loop_errors_for_process`); library code scopes it.
+
 Progress bars (tqdm, drawn on stderr) are shown only when stderr is a terminal: when it is a file or a
 pipe, the bars' carriage-return redraws are dropped, so a failed command's stderr is exactly its one-line
 ``jaxgest: <message>`` (and a log holds no bar fragments). Other stderr output passes through unchanged.
@@ -47,7 +50,7 @@ def _leaf_parsers(parser: argparse.ArgumentParser):
 
 def add_strict_flag(parser: argparse.ArgumentParser) -> None:
     """``--strict`` on every command that reads a workdir's checkpoints: refuse an unreadable checkpoint
-    instead of falling back to the newest readable one (:func:`jaxgest.training.strict_checkpoints`)."""
+    instead of falling back to the newest readable one (:func:`jaxgest.checkpoint.strict_checkpoints`)."""
     for p in _leaf_parsers(parser):
         options = {o for a in p._actions for o in a.option_strings}
         if options & set(WORKDIR_OPTIONS) and "--strict" not in options:
@@ -118,11 +121,12 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    strict = contextlib.nullcontext()
-    if getattr(args, "strict", False):
-        from jaxgest.training import strict_checkpoints
+    from jaxgest.checkpoint import mute_closed_loop_errors_for_process, strict_checkpoints
 
-        strict = strict_checkpoints(True)
+    # the command owns the process: asyncio "Event loop is closed" noise of a damaged checkpoint's reads can
+    # still surface at interpreter exit, after every Checkpointer is closed
+    mute_closed_loop_errors_for_process()
+    strict = strict_checkpoints(True) if getattr(args, "strict", False) else contextlib.nullcontext()
     try:
         with _stderr_without_bars(), strict:
             rc = args.func(args)

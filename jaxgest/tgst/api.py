@@ -139,8 +139,7 @@ class TGSTModel:
 
 def foot_names(skeleton) -> list[str]:
     """The rig's foot and toe joints of the 21-joint body (``body.FEET`` through its joint map)."""
-    joints = body.load_map(body.detect_map(skeleton))["joints"]
-    return [joints[n] for n in body.FEET]
+    return body.rig_joints(skeleton, body.FEET)
 
 
 def content_floor_contact(result: Motion, content: Motion) -> Motion:

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgest.motion import rotations
+from jaxgest.nn import safe_norm
 from jaxgest.tgst.config import AutoencoderConfig
 
 
@@ -147,13 +148,6 @@ class MotionAutoencoder(nn.Module):
         return (self.decode_upper(z), self.decode_lower(z)), {"latents": z}
 
 
-def _safe_norm(x: jax.Array, axis: int = -1) -> jax.Array:
-    """L2 norm with a zero (not NaN) gradient at 0, like ``torch.norm``."""
-    sq = jnp.sum(x * x, axis=axis)
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
-
-
 def expmap_reconstruction_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
     """Mean over frames and joints of the per-joint exp-map difference norm ``||r_hat - r||_2``.
 
@@ -165,7 +159,7 @@ def expmap_reconstruction_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
     chex.assert_equal_shape([pred, target])
     b, f, c = pred.shape
     d = (pred - target).reshape(b, f, c // 3, 3)
-    return jnp.mean(_safe_norm(d), axis=(1, 2))
+    return jnp.mean(safe_norm(d), axis=(1, 2))
 
 
 def angular_error_rad(pred: jax.Array, target: jax.Array) -> jax.Array:

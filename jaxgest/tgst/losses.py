@@ -11,14 +11,9 @@ import chex
 import jax
 import jax.numpy as jnp
 
+from jaxgest.nn import safe_norm
+
 _EPS = 1e-8
-
-
-def _safe_norm(x: jax.Array, axis=-1) -> jax.Array:
-    """L2 norm with a zero (not NaN) gradient at 0."""
-    sq = jnp.sum(x * x, axis=axis)
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
 def token_norm(x: jax.Array) -> jax.Array:
@@ -27,7 +22,7 @@ def token_norm(x: jax.Array) -> jax.Array:
     References: Kuriyama et al. 2022, §3.5 ("averaged L2-norm computed per each token").
     """
     chex.assert_rank(x, 3)
-    return jnp.mean(_safe_norm(x), axis=1)
+    return jnp.mean(safe_norm(x), axis=1)
 
 
 def identity_loss(content_identity: jax.Array, content_tokens: jax.Array, style_identity: jax.Array,
@@ -59,7 +54,7 @@ def structure_matrix(keys: jax.Array) -> jax.Array:
     References: Kuriyama et al. 2022, eq. 9.
     """
     chex.assert_rank(keys, 3)
-    unit = keys / jnp.maximum(_safe_norm(keys)[..., None], _EPS)
+    unit = keys / jnp.maximum(safe_norm(keys)[..., None], _EPS)
     return jnp.einsum("bid,bjd->bij", unit, unit)
 
 
@@ -70,7 +65,7 @@ def structure_loss(content_keys: jax.Array, transferred_keys: jax.Array) -> jax.
     """
     chex.assert_equal_shape([content_keys, transferred_keys])
     diff = structure_matrix(content_keys) - structure_matrix(transferred_keys)
-    return _safe_norm(diff.reshape(diff.shape[0], -1))
+    return safe_norm(diff.reshape(diff.shape[0], -1))
 
 
 def appearance_loss(style_cls: jax.Array, transferred_cls: jax.Array) -> jax.Array:
@@ -80,7 +75,7 @@ def appearance_loss(style_cls: jax.Array, transferred_cls: jax.Array) -> jax.Arr
     """
     chex.assert_equal_shape([style_cls, transferred_cls])
     chex.assert_rank(style_cls, 2)
-    return _safe_norm(style_cls - transferred_cls)
+    return safe_norm(style_cls - transferred_cls)
 
 
 def total_transformer_loss(identity: jax.Array, cyclic: jax.Array, structure: jax.Array,

@@ -351,8 +351,7 @@ def leakage(model, clips, *, targets_per_clip: int = 3) -> dict:
 
 
 def _hand_indices(motion):
-    jm = B.load_map(B.detect_map(motion.skeleton))["joints"]
-    return [motion.skeleton.index(jm[h]) for h in B.HANDS]
+    return B.joint_indices(motion.skeleton, B.HANDS)
 
 
 def beat_scores(motion, audio, sr: int, *, seed: int = 0) -> dict:

@@ -256,6 +256,7 @@ class Checkpointer:
       subdir: checkpoint folder name inside the workdir (one per trained stage).
       max_to_keep: how many step checkpoints to keep (at least two, so there is one to fall back to).
       ignore: config keys not compared on restore (e.g. the requested number of steps).
+      read_config: maps a stored config (of an older layout) to the current one before it is compared.
       read_only: open for inference (nothing is created, moved or cleaned up).
       strict: refuse to fall back past an unreadable checkpoint (default: :func:`strict_checkpoints`).
     """
@@ -270,6 +271,7 @@ class Checkpointer:
         subdir: str = "checkpoints",
         max_to_keep: int = 2,
         ignore: Iterable[str] = ("steps",),
+        read_config: Optional[Callable[[Mapping], Mapping]] = None,
         read_only: bool = False,
         strict: Optional[bool] = None,
     ):
@@ -281,6 +283,7 @@ class Checkpointer:
         self.kind = kind
         self.stage = pathlib.PurePath(subdir).name if subdir != "checkpoints" else kind
         self.ignore = tuple(ignore)
+        self.read_config = read_config
         self.read_only = read_only
         self.strict = strict
         self.restored_step: Optional[int] = None  # the step the last restore used
@@ -367,7 +370,10 @@ class Checkpointer:
             problems.append(f"model kind: {stored.get('kind')!r} -> {self.meta['kind']!r}")
         if stored.get("skeleton") != self.meta["skeleton"] and self.meta["skeleton"] is not None:
             problems.append(f"skeleton signature: {stored.get('skeleton')} -> {self.meta['skeleton']}")
-        a = {k: v for k, v in (stored.get("config") or {}).items() if k not in self.ignore}
+        stored_config = stored.get("config") or {}
+        if self.read_config is not None:
+            stored_config = _normalise(dict(self.read_config(stored_config)))
+        a = {k: v for k, v in stored_config.items() if k not in self.ignore}
         b = {k: v for k, v in self.meta["config"].items() if k not in self.ignore}
         diff = config_diff(a, b)
         fa, fb = _flat(a), _flat(b)

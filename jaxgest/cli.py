@@ -20,7 +20,9 @@ import argparse
 import contextlib
 import importlib
 import io
+import pathlib
 import sys
+from typing import Optional
 
 from jaxgest.errors import JaxgestError
 
@@ -57,6 +59,38 @@ def add_strict_flag(parser: argparse.ArgumentParser) -> None:
             p.add_argument("--strict", action="store_true",
                            help="stop at an unreadable checkpoint instead of falling back to the newest "
                                 "readable one")
+
+
+LOG_EVERY = 50  # default --log-every of every train command
+
+
+def add_train_arguments(parser: argparse.ArgumentParser, *, presets, data_help: str, workdir_help: str,
+                        steps_help: str, ckpt_every: Optional[int] = 500,
+                        ckpt_help: str = "checkpoint every N steps (and at the end)") -> None:
+    """The arguments every ``<model> train`` command shares, with one set of defaults: ``--data``,
+    ``--workdir``, ``--preset``, ``--steps``, ``--seed``, ``--devices``, ``--ckpt-every``, ``--log-every``.
+    Pass the parsed namespace to :func:`training_data` for the data folder."""
+    parser.add_argument("--data", default=None, help=data_help)
+    parser.add_argument("--workdir", required=True, help=workdir_help)
+    parser.add_argument("--preset", default="tiny", choices=tuple(presets))
+    parser.add_argument("--steps", type=int, default=None, help=steps_help)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
+    parser.add_argument("--ckpt-every", type=int, default=ckpt_every, help=ckpt_help)
+    parser.add_argument("--log-every", type=int, default=LOG_EVERY,
+                        help=f"metrics.jsonl line every N steps (default {LOG_EVERY})")
+
+
+def training_data(args: argparse.Namespace) -> pathlib.Path:
+    """The data folder of a train command: ``--data``, or the built-in synthetic data written once to
+    ``<workdir>/synthetic-data`` (:func:`jaxgest.motion.synthetic.dataset.training_folder`). The step counts
+    and intervals are checked first, so a bad argument writes nothing."""
+    from jaxgest.motion.synthetic.dataset import training_folder
+    from jaxgest.training import check_intervals, check_steps
+
+    check_steps(**{k: getattr(args, k) for k in ("steps", "ae_steps", "transformer_steps") if hasattr(args, k)})
+    check_intervals(log_every=args.log_every, ckpt_every=args.ckpt_every)
+    return training_folder(args.data, args.workdir, progress=True)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -34,6 +34,7 @@ import numpy as np
 from jaxgest import metrics
 from jaxgest.errors import DataError
 from jaxgest.tgst import model as tgst_model
+from jaxgest.tgst.config import InferenceConfig
 from jaxgest.tgst.protocol import (CM_TO_M, PROTOCOLS, Protocol, _joint_indices, _notes, clip_errors,  # noqa: F401
                                    clip_features, features_errors, get_protocol, style_reference)
 
@@ -46,7 +47,7 @@ NEUTRAL = ("normal", "neutral")
 STATS = ("mean", "worst", "w25")
 ERROR_KEYS = ("content", "style", "gt_content", "gt_style")
 CONTROLS = ("content_as_is", "style_as_is")
-DEFAULT_BUCKET = 1.25
+DEFAULT_BUCKET = InferenceConfig.bucket  # length-bucket ratio of batched transfers
 
 
 # --------------------------------------------------------------------------------------------------------

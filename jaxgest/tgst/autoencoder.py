@@ -125,23 +125,21 @@ class MotionAutoencoder(nn.Module):
             upper = (upper - mean) / std
         return self.encoder(upper)
 
-    def decode_upper(self, z: jax.Array) -> jax.Array:
-        """Latents ``(batch, T, 16)`` -> upper-body exp-maps ``(batch, 4T, 39)``."""
+    def _decode(self, decoder, part: str, z: jax.Array) -> jax.Array:
         chex.assert_rank(z, 3)
-        y = self.upper_decoder(z)
+        y = decoder(z)
         if self.config.standardize:
-            mean, std = self._stats("upper")
+            mean, std = self._stats(part)
             y = mean + std * y
         return y
 
+    def decode_upper(self, z: jax.Array) -> jax.Array:
+        """Latents ``(batch, T, 16)`` -> upper-body exp-maps ``(batch, 4T, 39)``."""
+        return self._decode(self.upper_decoder, "upper", z)
+
     def decode_lower(self, z: jax.Array) -> jax.Array:
         """Latents ``(batch, T, 16)`` -> lower-body exp-maps ``(batch, 4T, 24)``."""
-        chex.assert_rank(z, 3)
-        y = self.lower_decoder(z)
-        if self.config.standardize:
-            mean, std = self._stats("lower")
-            y = mean + std * y
-        return y
+        return self._decode(self.lower_decoder, "lower", z)
 
     def __call__(self, upper: jax.Array):
         z = self.encode(upper)

@@ -441,17 +441,21 @@ def evaluate(
         c_feats, s_ref = cache(pair.content, fps), cache(pair.style, fps, True)
         gt, gt_ref = _gt_features(pair, cache, fps, window)
         # controls: the content clip and the style clip (its plain features) taken as the result
-        for name, feats in (("content_as_is", c_feats), ("style_as_is", None)):
+        def score(section: str, name: str, result_feats) -> None:
+            """Errors of one result (features, or a callable giving them) into ``record`` and the totals."""
             try:
-                feats = feats if feats is not None else cache(pair.style, fps)
+                feats = result_feats() if callable(result_feats) else result_feats
                 errs = features_errors(feats, c_feats, s_ref, gt, window=window, gt_reference_feats=gt_ref)
             except DataError as e:
                 skipped[name] += 1
-                record["controls"][name] = {"skipped": str(e)}
-                continue
-            record["controls"][name] = errs
+                record[section][name] = {"skipped": str(e)}
+                return
+            record[section][name] = errs
             for k, v in errs.items():
                 collected[name][k].append(v)
+
+        score("controls", "content_as_is", c_feats)
+        score("controls", "style_as_is", lambda: cache(pair.style, fps))
         results, failure = {}, None
         try:
             if batched is not None:
@@ -462,21 +466,15 @@ def evaluate(
         except DataError as e:
             failure = str(e)
         for method in methods:
-            try:
+            def transferred(method=method):
                 if failure is not None:
                     raise DataError(failure)
                 result = results.get(method)
                 if result is None:
                     result = model.transfer(pair.content.motion, pair.style.motion, method=method)
-                errs = features_errors(clip_features(result, fps, proto), c_feats, s_ref, gt, window=window,
-                                       gt_reference_feats=gt_ref)
-            except DataError as e:
-                skipped[method] += 1
-                record["errors"][method] = {"skipped": str(e)}
-                continue
-            record["errors"][method] = errs
-            for k, v in errs.items():
-                collected[method][k].append(v)
+                return clip_features(result, fps, proto)
+
+            score("errors", method, transferred)
     label = proto.label
     summary = {m: dict(_summarize(collected[m], skipped[m]), protocol=label) for m in methods}
     controls = {m: dict(_summarize(collected[m], skipped[m]), protocol=label) for m in CONTROLS}

@@ -45,8 +45,9 @@ def _train(args) -> int:
     ae = args.ae_steps if args.ae_steps is not None else args.steps
     tr = args.transformer_steps if args.transformer_steps is not None else args.steps
     ablate = tuple(a.strip() for a in args.ablate.split(",") if a.strip()) if args.ablate else ()
-    summary = train(training_data(args), args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr, seed=args.seed,
-                    devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every, ablate=ablate)
+    summary = train(training_data(args), args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr,
+                    seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
+                    ablate=ablate)
     print(format_summary(summary))
     return 0
 

@@ -34,12 +34,12 @@ Presets (``preset(name)``):
   content label equally often); the transformer's tokens carry no positions (``token_positions="none"``,
   as in the authors' code) so the soft swap matches tokens by content, not by index.
   Command: ``jaxgest tgst train --data DIR --workdir W --preset fit``. See experiments/tgst_bandai.
-* ``"tiny"`` -- the same (already tiny) widths, but short windows and small batches (AE window 64, batch 4;
-  transformer window 128, batch 4) and Adam 1e-3 so tests and ``jaxgest demo --quick`` train in seconds
-  to a minute on a CPU. Not the paper's training setup.
+* ``"tiny"`` -- the paper's model (the same :class:`ModelConfig`: the widths are already tiny) with short
+  windows and small batches (AE window 64, batch 4; transformer window 128, batch 4) and Adam 1e-3 so tests
+  and ``jaxgest demo --quick`` train in seconds to a minute on a CPU. Not the paper's training setup.
 
 Training windows are scaled to the data (:func:`jaxgest.tgst.data.fit_windows`): each window is
-``min(preset window, median clip length at cfg.fps rounded down to a multiple of 16)``, so the
+``min(preset window, median clip length at cfg.model.fps rounded down to a multiple of 16)``, so the
 Bandai-Namco clips (30 fps, mostly 4-15 s, resampled to 60 fps) train with the ``paper`` preset; the
 windows actually used are stored in the workdir's config.json.
 

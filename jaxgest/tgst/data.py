@@ -152,7 +152,8 @@ def ae_batch(data: BodyData, cfg: Config, seed: int, step: int) -> dict:
     groups = None
     if cfg.train.autoencoder.sampling == "content":
         groups = list(data.contents or data.names) * copies
-    w = sample_windows_idx(np.concatenate([data.lengths] * copies), cfg.train.autoencoder.window, cfg.train.autoencoder.batch_size, rng,
+    t = cfg.train.autoencoder
+    w = sample_windows_idx(np.concatenate([data.lengths] * copies), t.window, t.batch_size, rng,
                            list(data.names) * copies, groups=groups)
     up = np.stack([uppers[i][s:s + cfg.train.autoencoder.window] for i, s in w])
     lo = np.stack([lowers[i][s:s + cfg.train.autoencoder.window] for i, s in w])

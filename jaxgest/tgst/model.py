@@ -1,8 +1,9 @@
 """TGST as pure functions of parameter pytrees: modules, init, encode/decode, token transfer.
 
 ``params = {"autoencoder": <MotionAutoencoder params>, "transformer": <StyleTransformer params>}`` (plain
-Flax ``params`` collections). Every function takes ``cfg`` (a hashable :class:`~jaxgest.tgst.config.ModelConfig`) as a keyword
-so it can be a jit static argument: ``jax.jit(transfer_arrays, static_argnames=("cfg", "method"))``.
+Flax ``params`` collections). Every function takes ``cfg`` (a hashable
+:class:`~jaxgest.tgst.config.ModelConfig`) as a keyword so it can be a jit static argument:
+``jax.jit(transfer_arrays, static_argnames=("cfg", "method"))``.
 
 The training losses built from these functions are in :mod:`jaxgest.tgst.losses`.
 References: Kuriyama et al. 2022, §3 (Fig. 2 data flow), §4.3 (baselines).

@@ -8,10 +8,11 @@ in :mod:`jaxgest.tgst.workdir`; config.json stores the effective :class:`~jaxges
 Both stages use optax Adam (§3.5), one jit-compiled step each (:func:`jaxgest.parallel.parallelize_step`,
 state donated, batch split over the devices) and :func:`jaxgest.training.train_loop` (NaN stop, tqdm,
 checkpoints). A run resumes from the latest checkpoint of each stage; a finished autoencoder is not
-retrained. The transformer's checkpoint records the autoencoder step it was trained on: resuming it on a
-different autoencoder raises CheckpointError (use a new workdir).
+retrained. The transformer's checkpoint records the autoencoder step it was trained on: when the autoencoder
+has trained further, that transformer is moved aside (:func:`jaxgest.tgst.workdir.set_aside_stale_transformer`)
+and retrained.
 
-Default step counts (``DEFAULT_STEPS``): tiny 200 + 200; paper 10,000 + 10,000 (about the paper's 1000
+Default step counts (``DEFAULT_STEPS``): tiny 200 + 200; fit 6,000 + 10,000; paper 10,000 + 10,000 (about the paper's 1000
 epochs of its 21 min of AE data in batches of 32 x 256 frames, and of its 63 content/style pairs in batches
 of 8). References: Kuriyama et al. 2022, §3.5, §4.1.
 """

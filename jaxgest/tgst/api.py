@@ -54,10 +54,13 @@ def count_params(preset: str = "paper") -> dict[str, int]:
     return {name: int(sum(x.size for x in jax.tree_util.tree_leaves(tree))) for name, tree in shapes.items()}
 
 
-@functools.lru_cache(maxsize=8)
+#: :func:`transfer_arrays` under ``jax.jit``; jit's own cache keeps one compilation per (config, method, shapes)
+_transfer_jit = jax.jit(transfer_arrays, static_argnames=("cfg", "method"))
+
+
 def compiled_transfer(cfg: ModelConfig, method: str):
-    """``jax.jit`` of :func:`transfer_arrays` for one (config, method); one compilation per clip shape."""
-    return jax.jit(functools.partial(transfer_arrays, cfg=cfg, method=method))
+    """The jit-compiled :func:`transfer_arrays` of one (config, method); one compilation per clip shape."""
+    return functools.partial(_transfer_jit, cfg=cfg, method=method)
 
 
 def _check_method(method: str) -> None:

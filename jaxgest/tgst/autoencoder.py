@@ -89,21 +89,14 @@ class MotionAutoencoder(nn.Module):
             upsample=(1,) * n_enc,
             final_activation=True,
         )
-        ones = (1,) * len(c.decoder_kernels)
-        self.upper_decoder = _ConvStack(
-            features=tuple(c.upper_decoder_channels) + (c.upper_channels,),
-            kernels=tuple(c.decoder_kernels),
-            strides=ones,
-            upsample=tuple(c.decoder_upsample),
-            final_activation=False,
-        )
-        self.lower_decoder = _ConvStack(
-            features=tuple(c.lower_decoder_channels) + (c.lower_channels,),
-            kernels=tuple(c.decoder_kernels),
-            strides=ones,
-            upsample=tuple(c.decoder_upsample),
-            final_activation=False,
-        )
+
+        def decoder(hidden, out: int) -> _ConvStack:  # the two decoders differ only in their widths
+            return _ConvStack(features=tuple(hidden) + (out,), kernels=tuple(c.decoder_kernels),
+                              strides=(1,) * len(c.decoder_kernels), upsample=tuple(c.decoder_upsample),
+                              final_activation=False)
+
+        self.upper_decoder = decoder(c.upper_decoder_channels, c.upper_channels)
+        self.lower_decoder = decoder(c.lower_decoder_channels, c.lower_channels)
 
         if c.standardize:  # frozen data statistics (set by training, never updated: stop_gradient below)
             zeros, ones = nn.initializers.zeros, nn.initializers.ones

@@ -8,10 +8,10 @@ References: Kuriyama et al. 2022, eq. 4 (swap weights), §4.3.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Sequence
 
+import jax
 import numpy as np
 
 from jaxgest.errors import DataError
@@ -51,21 +51,18 @@ def _swap_weights(params, content_upper, style_upper, *, cfg):
     return tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method="soft")[2]["swap_weights"]
 
 
-@functools.lru_cache(maxsize=16)
-def _pair_function(cfg, methods: tuple, weights: bool):
-    """One jitted function per (config, methods): every method's transfer of one (padded) pair, plus the
-    soft-swap weights; jax.jit compiles it once per (content, style) bucket shape."""
-    import jax
+def _pair_outputs(params, content_upper, style_upper, *, cfg, methods: tuple, weights: bool):
+    """Every method's transfer of one (padded) pair, plus the soft-swap weights (None without ``weights``)."""
+    outs = {}
+    for m in methods:
+        up, lo, _ = tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method=m)
+        outs[m] = (up, lo)
+    w = _swap_weights(params, content_upper, style_upper, cfg=cfg) if weights else None
+    return outs, w
 
-    def run(params, content_upper, style_upper):
-        outs = {}
-        for m in methods:
-            up, lo, _ = tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method=m)
-            outs[m] = (up, lo)
-        w = _swap_weights(params, content_upper, style_upper, cfg=cfg) if weights else None
-        return outs, w
 
-    return jax.jit(run)
+#: one jitted call per pair; jit's own cache compiles once per (config, methods, bucket shapes)
+_pair_jit = jax.jit(_pair_outputs, static_argnames=("cfg", "methods", "weights"))
 
 
 class BatchedTransfer:
@@ -107,8 +104,8 @@ class BatchedTransfer:
         self.shapes.add((bc, bs))
         c = np.pad(cu, ((0, bc - fc), (0, 0)), mode=self.pad_mode)[None]
         s = np.pad(su, ((0, bs - fs), (0, 0)), mode=self.pad_mode)[None]
-        fn = _pair_function(self.model.cfg, self.methods, self.diagnostics)
-        outs, w = fn(self.model.params, c, s)
+        outs, w = _pair_jit(self.model.params, c, s, cfg=self.model.cfg, methods=self.methods,
+                            weights=self.diagnostics)
         results = {}
         for m, (up, lo) in outs.items():
             results[m] = self.model.to_motion(np.asarray(up[0, :fc]), np.asarray(lo[0, :fc]),

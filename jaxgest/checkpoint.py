@@ -70,7 +70,7 @@ def config_diff(stored: Mapping, requested: Mapping, prefix: str = "") -> list[s
 
 
 FORMAT_VERSION = 1
-MODELS = ("tgst", "zeggs")  # what config.json's "kind" (TGST) / "model" (ZeroEGGS) may name
+MODELS = ("tgst", "zeggs")  # what config.json's "model" (earlier TGST workdirs: "kind") may name
 """Workdir format written by this version (``"format_version"`` in config.json and in each checkpoint's meta;
 absent = 1). A workdir stamped with a newer version is refused with a one-line error."""
 
@@ -673,7 +673,7 @@ def check_workdir_config(workdir, kind: Optional[str] = None, *, lenient: bool =
         raise CheckpointError(f"{workdir}: written by a newer jaxgest (workdir format {version}, this "
                               f"version reads up to {FORMAT_VERSION}); upgrade jaxgest, or retrain into a new "
                               "--workdir")
-    model = stored.get("kind", stored.get("model"))
+    model = stored.get("model", stored.get("kind"))  # "kind": TGST workdirs of earlier versions
     if model not in MODELS:
         raise CheckpointError(f"{workdir}: config.json names {'no model' if model is None else repr(model)} "
                               f"(this jaxgest knows {', '.join(MODELS)}): an older layout or not a jaxgest "

@@ -12,9 +12,12 @@ from __future__ import annotations
 
 import contextlib
 import glob
+import json
 import os
 import pathlib
 import tempfile
+
+import numpy as np
 
 from jaxgest.errors import DataError, WriteError
 
@@ -100,3 +103,21 @@ def write_text_atomic(path, text: str) -> pathlib.Path:
         with open(tmp, "w", newline="") as f:
             f.write(text)
     return pathlib.Path(path)
+
+
+def json_default(o):
+    """``json.dumps(default=...)`` for numpy scalars and arrays, tuples and sets."""
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.floating):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (tuple, set)):
+        return list(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def write_json_atomic(path, obj) -> pathlib.Path:
+    """Write ``obj`` as indented, key-sorted JSON to ``path`` through :func:`atomic_output`."""
+    return write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True, default=json_default) + "\n")

@@ -11,14 +11,13 @@ matplotlib's ``PillowWriter`` writes them, so a 10 s clip takes about a second o
 
 from __future__ import annotations
 
-import os
 import pathlib
-import tempfile
 from typing import Optional, Sequence, Union
 
 import numpy as np
 
 from jaxgest.errors import DataError
+from jaxgest.io import atomic_output, check_output_path
 from jaxgest.motion.skeleton import Motion
 
 YAW_DEG = 25.0  # 3/4 view: the camera sits front-right of the character
@@ -56,13 +55,6 @@ def _as_list(motions) -> list:
     if not motions or not all(isinstance(m, Motion) for m in motions):
         raise DataError("render: expected one Motion or a non-empty list of Motions")
     return motions
-
-
-def _check_out(out_path) -> pathlib.Path:
-    out = pathlib.Path(out_path)
-    if not out.parent.is_dir():
-        raise DataError(f"{out}: output directory {out.parent} does not exist")
-    return out
 
 
 def _positions(m: Motion) -> np.ndarray:
@@ -174,15 +166,6 @@ class _Figure:
         plt.close(self.fig)
 
 
-def _tmp_beside(out: pathlib.Path) -> str:
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=out.suffix or ".tmp", dir=out.parent)
-    os.close(fd)
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(tmp, 0o666 & ~mask)  # a normal file's permissions, not mkstemp's 0600
-    return tmp
-
-
 def _titles(titles, n):
     if titles is None:
         return None
@@ -204,7 +187,7 @@ def render_gif(
 
     Args:
       motions: a Motion or a list of Motions (one panel each; shorter clips hold their last frame).
-      out_path: the .gif to write (atomically: a temp file beside it, then ``os.replace``).
+      out_path: the .gif to write (atomically, :func:`jaxgest.io.atomic_output`).
       titles: one title per panel, or None.
       fps: GIF frame rate; default ``min(motion fps, 20)``, frames are subsampled in time.
       max_seconds: render at most this many seconds.
@@ -215,7 +198,7 @@ def render_gif(
     from PIL import Image
 
     motions = _as_list(motions)
-    out = _check_out(out_path)
+    out = check_output_path(out_path)
     titles = _titles(titles, len(motions))
     src_fps = min(m.fps for m in motions)
     fps = float(min(src_fps, 20.0) if fps is None else fps)
@@ -226,20 +209,17 @@ def render_gif(
         duration = min(duration, float(max_seconds))
     n_out = max(1, int(np.floor(duration * fps + 1e-9)))
     fig = _Figure(motions, titles, yaw_deg)
-    tmp = _tmp_beside(out)
     try:
         times = np.arange(n_out) / fps
         frame_lists = ([min(int(round(t * m.fps)), m.num_frames - 1) for m in motions] for t in times)
         images = [Image.fromarray(rgb).convert("P", palette=Image.Palette.ADAPTIVE, colors=32)
                   for rgb in fig.frames_rgb(frame_lists)]
         # what matplotlib's PillowWriter does, without re-drawing the static parts for every frame
-        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
-                       duration=int(round(1000 / fps)), loop=0)
-        os.replace(tmp, out)
+        with atomic_output(out) as tmp:
+            images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
+                           duration=int(round(1000 / fps)), loop=0)
     finally:
         fig.close()
-        if os.path.exists(tmp):
-            os.remove(tmp)
     return out
 
 
@@ -252,10 +232,9 @@ def render_png(
 ) -> pathlib.Path:
     """A still PNG of ``frame`` (default: the middle frame) of one or several motions side by side."""
     motions = _as_list(motions)
-    out = _check_out(out_path)
+    out = check_output_path(out_path)
     titles = _titles(titles, len(motions))
     fig = _Figure(motions, titles, yaw_deg)
-    tmp = _tmp_beside(out)
     try:
         frames = []
         for m in motions:
@@ -264,10 +243,8 @@ def render_png(
                 raise DataError(f"render: frame {frame} outside {m.name or 'motion'} ({m.num_frames} frames)")
             frames.append(f % m.num_frames)
         fig.draw(frames)
-        fig.fig.savefig(tmp, dpi=DPI, format="png")
-        os.replace(tmp, out)
+        with atomic_output(out) as tmp:
+            fig.fig.savefig(tmp, dpi=DPI, format="png")
     finally:
         fig.close()
-        if os.path.exists(tmp):
-            os.remove(tmp)
     return out

@@ -157,13 +157,16 @@ def _tgst_setup(batch_size: int):
         body = tdata.load_body_data(_synthetic_dir(), cfg0)
         _DATA["tgst"] = (tdata.fit_windows(cfg0, body), body)
     cfg, body = _DATA["tgst"]
-    return dataclasses.replace(cfg, ae_batch_size=batch_size, transformer_batch_size=batch_size), body
+    t = cfg.train
+    train = dataclasses.replace(t, autoencoder=dataclasses.replace(t.autoencoder, batch_size=batch_size),
+                                transformer=dataclasses.replace(t.transformer, batch_size=batch_size))
+    return dataclasses.replace(cfg, train=train), body
 
 
 def _tgst_params(cfg, seed: int):
     from jaxgest.tgst.model import init_params
 
-    return jax.jit(init_params, static_argnames="cfg")(cfg=cfg, key=jax.random.PRNGKey(seed))
+    return jax.jit(init_params, static_argnames="cfg")(cfg=cfg.model, key=jax.random.PRNGKey(seed))
 
 
 @register("tgst_ae")
@@ -175,7 +178,7 @@ def build_tgst_ae(seed: int, batch_size: int):
     from jaxgest.tgst.steps import create_ae_state, make_ae_train_step
 
     cfg, body = _tgst_setup(batch_size)
-    tx = optax.adam(cfg.ae_learning_rate)
+    tx = optax.adam(cfg.train.autoencoder.learning_rate)
     state = create_ae_state(cfg, _tgst_params(cfg, seed)["autoencoder"], tx)
     return state, make_ae_train_step(cfg, tx), lambda i: tdata.ae_batch(body, cfg, seed, i)
 
@@ -189,7 +192,7 @@ def build_tgst_transformer(seed: int, batch_size: int):
     from jaxgest.tgst.steps import create_transformer_state, make_transformer_train_step
 
     cfg, body = _tgst_setup(batch_size)
-    tx = optax.adam(cfg.transformer_learning_rate)
+    tx = optax.adam(cfg.train.transformer.learning_rate)
     params = _tgst_params(cfg, seed)
     state = create_transformer_state(cfg, params["transformer"], tx)
     step = make_transformer_train_step(cfg, tx, params["autoencoder"])

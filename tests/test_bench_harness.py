@@ -217,7 +217,7 @@ def test_numpy_reference_matches_the_jax_transfer():
     from jaxgest.tgst.config import get_config
     from jaxgest.tgst.model import init_params, transfer_arrays
 
-    cfg = get_config("paper")
+    cfg = get_config("paper").model
     params = jax.jit(lambda k: init_params(cfg, k))(jax.random.PRNGKey(1))
     rng = np.random.default_rng(0)
     c = rng.normal(scale=0.4, size=(2, 100, 39)).astype(np.float32)

@@ -195,3 +195,11 @@ def test_body_onto_zeggs_follows_the_body_and_keeps_unmapped_joints(zeggs_clip, 
 def test_detect_map_on_real_skeletons(bandai_dir, zeggs_clip):
     assert B.detect_map(bvh.load(bandai_dir / "dataset-1_bow_active_001.bvh").skeleton) == "bandai_namco"
     assert B.detect_map(zeggs_clip.skeleton) == "zeggs"
+
+
+def test_load_map_returns_a_private_copy():
+    a = B.load_map("zeggs")
+    a["joints"]["Hips"] = "changed"
+    assert B.load_map("zeggs")["joints"]["Hips"] != "changed"
+    sk = B.body_skeleton()
+    assert B.joint_indices(sk, B.HANDS) == [sk.index("Hand_L"), sk.index("Hand_R")]

@@ -462,17 +462,18 @@ def test_checkpoint_from_a_newer_version(ctx, capsys, tmp_path):
 @pytest.mark.parametrize("model", ["tgst", "zeggs"])
 def test_unknown_model_kind(ctx, capsys, tmp_path, model):
     work = copy(ctx, model, tmp_path)
-    _edit_config(work, lambda d: d.update({"kind" if model == "tgst" else "model": "gesturenet"}))
+    _edit_config(work, lambda d: d.update(model="gesturenet"))
     rc, err, _ = run(infer(ctx, model, work, tmp_path / "o.bvh"), capsys)
     assert rc == 2 and err == (f"jaxgest: {work}: config.json names 'gesturenet' (this jaxgest knows tgst, zeggs): "
                                "an older layout or not a jaxgest workdir; retrain into a new --workdir"), err
 
 
-@pytest.mark.parametrize("model,field", [("tgst", "transformer_window")])
+@pytest.mark.parametrize("model,field", [("tgst", "edge_frames")])
 def test_older_layout_without_a_current_field(ctx, capsys, tmp_path, model, field):
-    """A workdir written before ``field`` existed (absent from config.json and from the checkpoints)."""
+    """A workdir written before ``field`` (of the model config) existed (absent from config.json and from the
+    checkpoints)."""
     work = copy(ctx, model, tmp_path)
-    _edit_config(work, lambda d: d["config"].pop(field))
+    _edit_config(work, lambda d: (d["config"]["model"] if model == "tgst" else d["config"]).pop(field))
     for stage in (("autoencoder", "transformer") if model == "tgst" else ("zeggs",)):
         _edit_meta(work, stage, lambda d: d["config"].pop(field, None))
     rc, err, _ = run(infer(ctx, model, work, tmp_path / "o.bvh"), capsys)

@@ -43,7 +43,8 @@ def _clips(data):
 def test_train_writes_config_metrics_checkpoints(trained):
     data, work, summary = trained
     cfg = json.loads((work / "config.json").read_text())
-    assert cfg["kind"] == "tgst" and cfg["preset"] == "tiny" and cfg["devices"] == 1
+    assert cfg["model"] == "tgst" and cfg["preset"] == "tiny" and cfg["devices"] == 1
+    assert set(cfg["config"]) == {"name", "model", "train", "inference"}
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
     stages = [(r["stage"], r["step"]) for r in lines]
     assert stages == [("autoencoder", 2), ("autoencoder", 4), ("transformer", 2), ("transformer", 4)]
@@ -64,7 +65,9 @@ def test_resume_continues_from_saved_steps(trained, tmp_path):
     assert again["transformer"]["start_step"] == 4 and again["transformer"]["steps"] == 6
 
 
-def test_other_preset_on_same_workdir_is_refused(trained, tmp_path):
+def test_another_model_on_same_workdir_is_refused(trained, tmp_path):
+    """fit has other networks than tiny (standardised autoencoder, no token positions): refused. paper has the
+    same networks and other training settings only, which a workdir may change."""
     from jaxgest.tgst.train import train
 
     data, work, _ = trained
@@ -72,18 +75,20 @@ def test_other_preset_on_same_workdir_is_refused(trained, tmp_path):
     shutil.copytree(work, copy)
     before = (copy / "config.json").read_text()
     with pytest.raises(CheckpointError, match="does not match"):
-        train(data, copy, preset="paper", ae_steps=1, transformer_steps=1, progress=False)
+        train(data, copy, preset="fit", ae_steps=1, transformer_steps=1, progress=False)
     assert (copy / "config.json").read_text() == before  # nothing overwritten
 
 
 def test_ablation_validated():
-    from jaxgest.tgst.config import get_config
+    from jaxgest.tgst.config import preset
     from jaxgest.tgst.train import apply_ablation
 
-    cfg = apply_ablation(get_config("tiny"), ["cyclic", "structure"])
-    assert not cfg.use_cyclic and not cfg.use_structure and cfg.use_identity and cfg.use_appearance
+    cfg = apply_ablation(preset("tiny"), ["cyclic", "structure"])
+    t = cfg.train.transformer
+    assert not t.use_cyclic and not t.use_structure and t.use_identity and t.use_appearance
+    assert cfg.model == preset("tiny").model  # an ablation changes the training only
     with pytest.raises(JaxgestError, match="unknown loss term"):
-        apply_ablation(get_config("tiny"), ["style"])
+        apply_ablation(preset("tiny"), ["style"])
 
 
 @pytest.mark.parametrize("method", ["soft", "hard", "adain", "avatarnet"])
@@ -190,20 +195,64 @@ def test_cli_errors_are_one_line(trained, tmp_path, capsys):
     assert not (tmp_path / "o.bvh").exists()
 
 
-def test_load_model_is_cached_until_the_workdir_is_retrained(trained, tmp_path):
-    from jaxgest.tgst.api import load_model
+def test_model_cache_reloads_only_when_a_checkpoint_step_changes(trained, tmp_path):
+    from jaxgest.tgst.api import ModelCache, load_model
     from jaxgest.tgst.train import train
 
     data, work, _ = trained
     copy = tmp_path / "w"
     shutil.copytree(work, copy)
-    first = load_model(copy)
-    assert load_model(copy) is first  # no second checkpoint restore
+    assert load_model(copy) is not load_model(copy)  # load_model itself keeps nothing
+    cache = ModelCache()
+    first = cache.get(copy)
+    assert cache.get(copy) is first and first.steps == {"autoencoder": 4, "transformer": 4}
+    (copy / "config.json").touch()  # a newer config.json alone is no reason to reload
+    assert cache.get(copy) is first
     train(data, copy, preset="tiny", ae_steps=4, transformer_steps=6, progress=False, log_every=2, ckpt_every=2)
-    again = load_model(copy)  # config.json rewritten by training: reloaded
-    assert again is not first
+    again = cache.get(copy)  # the transformer has a new step: reloaded
+    assert again is not first and again.steps["transformer"] == 6
     flat = lambda m: np.concatenate([np.ravel(x) for x in jax.tree_util.tree_leaves(m.params["transformer"])])
     assert not np.allclose(flat(again), flat(first))
+
+
+def _legacy_flat(cfg) -> dict:
+    """The flat config dict the versions before the model/train/inference split stored."""
+    from jaxgest.tgst.config import _LEGACY_TRAIN
+
+    flat = {"name": cfg.name, **cfg.model.to_dict()}
+    for old, (stage, field) in _LEGACY_TRAIN.items():
+        flat[old] = getattr(getattr(cfg.train, stage), field)
+    return flat
+
+
+def test_a_workdir_of_the_flat_config_layout_still_transfers(trained, model, tmp_path):
+    """config.json and both checkpoints in the layout before the split ("kind", one flat config) load and
+    transfer exactly like the same weights in the new layout."""
+    import optax
+
+    from jaxgest.tgst import workdir as W
+    from jaxgest.tgst.api import load_model
+    from jaxgest.training import Checkpointer, TrainState, write_json_atomic
+
+    data, work, _ = trained
+    old = tmp_path / "old"
+    old.mkdir()
+    stored = json.loads((work / "config.json").read_text())
+    flat = _legacy_flat(model.config)
+    del flat["swap_similarity"]  # a field added later: absent in the oldest workdirs (default "dot")
+    legacy = {k: v for k, v in stored.items() if k not in ("model", "config")}
+    write_json_atomic(old / "config.json", {**legacy, "kind": "tgst", "config": flat})
+    for sub, kind, params, extra in ((W.AE_SUBDIR, W.AE_KIND, model.params["autoencoder"], {}),
+                                     (W.TRANSFORMER_SUBDIR, W.TRANSFORMER_KIND, model.params["transformer"],
+                                      {"autoencoder_step": 4})):
+        state = TrainState.create(apply_fn=None, params=params, tx=optax.adam(1e-3))
+        with Checkpointer(old, kind=kind, config={**flat, **extra}, skeleton=stored["skeleton"], subdir=sub) as ck:
+            ck.save(state.replace(step=4))
+    loaded = load_model(old)
+    assert loaded.cfg == model.cfg and loaded.config.train == model.config.train
+    content, style = (bvh.load(p) for p in _clips(data)[:2])
+    a, b = loaded.transfer(content, style), model.transfer(content, style)
+    np.testing.assert_allclose(a.rotations, b.rotations, atol=1e-6)
 
 
 def test_training_the_autoencoder_further_retrains_a_stale_transformer(trained, tmp_path):

@@ -19,7 +19,7 @@ from jaxgest.tgst import data as tdata
 from jaxgest.tgst import model as tmodel
 from jaxgest.tgst.autoencoder import (MotionAutoencoder, expmap_reconstruction_loss, mean_angular_error_deg,
                                       upsample_linear)
-from jaxgest.tgst.config import TGSTConfig, config_from_dict, get_config
+from jaxgest.tgst.config import Config, ModelConfig, preset
 from jaxgest.tgst.model import init_params, transfer_arrays
 from jaxgest.tgst.steps import (create_ae_state, create_transformer_state, make_ae_train_step,
                                 make_transformer_train_step)
@@ -27,9 +27,10 @@ from jaxgest.tgst.tokens import ClipTooShortError
 from jaxgest.tgst.transformer import (StyleTransformer, StyleTransformerEncoder, band_mask,
                                       blockwise_banded_attention, dense_banded_attention)
 
-TINY = get_config("tiny")
+TINY = preset("tiny")
 # omega = 2 so that the band matters on short test clips (7 tokens for 64 frames)
-CFG = dataclasses.replace(TINY, transformer=dataclasses.replace(TINY.transformer, omega=2, block_size=4))
+CFG = dataclasses.replace(TINY.model, transformer=dataclasses.replace(TINY.model.transformer, omega=2, block_size=4))
+FULL = dataclasses.replace(TINY, model=CFG)  # the preset with that model, for the training steps
 
 
 def _normal(seed, shape, scale=1.0):
@@ -67,7 +68,7 @@ def _random_like(shapes, seed=0):
 
 @pytest.fixture(scope="module")
 def params():
-    return _random_like(jax.eval_shape(lambda k: init_params(CFG, k), jax.random.PRNGKey(0)))
+    return _random_like(jax.eval_shape(lambda k: init_params(CFG, k), jax.random.key(0)))
 
 
 def _count(tree):
@@ -83,15 +84,15 @@ def test_param_counts_paper():
 @pytest.mark.parametrize("variant", ["paper", "authors"])
 @pytest.mark.parametrize("lns,expected", [(1, 50240), (2, 50496)])
 def test_transformer_param_count_layernorms(variant, lns, expected):
-    tcfg = dataclasses.replace(get_config("paper").transformer, layernorms_per_block=lns, variant=variant)
+    tcfg = dataclasses.replace(preset("paper").model.transformer, layernorms_per_block=lns, variant=variant)
     tok = jnp.zeros((1, 5, 64))
-    shapes = jax.eval_shape(StyleTransformer(tcfg).init, jax.random.PRNGKey(0), tok, tok)
+    shapes = jax.eval_shape(StyleTransformer(tcfg).init, jax.random.key(0), tok, tok)
     assert _count(shapes) == expected
 
 
 def test_autoencoder_layer_sizes_and_shapes():
-    ae = MotionAutoencoder(get_config("paper").autoencoder)
-    shapes = jax.eval_shape(ae.init, jax.random.PRNGKey(0), jnp.zeros((2, 64, 39)))["params"]
+    ae = MotionAutoencoder(preset("paper").model.autoencoder)
+    shapes = jax.eval_shape(ae.init, jax.random.key(0), jnp.zeros((2, 64, 39)))["params"]
     sizes = {part: [_count(shapes[part][f"conv_{i}"]) for i in range(3)]
              for part in ("encoder", "upper_decoder", "lower_decoder")}
     assert sizes == {"encoder": [2560, 6176, 1552], "upper_decoder": [1568, 6208, 2535],
@@ -110,13 +111,13 @@ def test_config_json_round_trip_and_validation():
 
     assert set(PRESETS) == set(DEFAULT_STEPS)
     for name in PRESETS:
-        cfg = get_config(name)
-        assert config_from_dict(json.loads(json.dumps(dataclasses.asdict(cfg)))) == cfg
-        hash(cfg)  # usable as a jit static argument
+        cfg = preset(name)
+        assert Config.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
+        hash(cfg), hash(cfg.model)  # usable as jit static arguments
     with pytest.raises(ValueError):
-        get_config("huge")
+        preset("huge")
     with pytest.raises(ValueError, match="block_size"):
-        TGSTConfig(transformer=dataclasses.replace(TINY.transformer, block_size=8))
+        ModelConfig(transformer=dataclasses.replace(TINY.model.transformer, block_size=8))
 
 
 def test_upsample_matches_pytorch_linear_align_corners_false():
@@ -175,9 +176,9 @@ def encoders():
     tok = _normal(0, (1, 24, 64))
     variables = None
     for impl in ("blockwise", "dense"):
-        tcfg = dataclasses.replace(TINY.transformer, omega=3, block_size=4, attention_impl=impl)
+        tcfg = dataclasses.replace(TINY.model.transformer, omega=3, block_size=4, attention_impl=impl)
         enc = StyleTransformerEncoder(tcfg)
-        variables = variables or _random_like(jax.eval_shape(enc.init, jax.random.PRNGKey(1), tok), seed=1)
+        variables = variables or _random_like(jax.eval_shape(enc.init, jax.random.key(1), tok), seed=1)
         out[impl] = jax.jit(lambda t, enc=enc: enc.apply(variables, t))
     return out, tok
 
@@ -267,10 +268,10 @@ def test_authors_variant_runs(params):
 
 def test_ae_loss_decreases(params):
     tx = optax.adam(3e-3)
-    state = create_ae_state(CFG, jax.tree_util.tree_map(jnp.copy, params["autoencoder"]), tx)  # donated
-    step = jax.jit(make_ae_train_step(CFG, tx), donate_argnums=(0,))
+    state = create_ae_state(FULL, jax.tree_util.tree_map(jnp.copy, params["autoencoder"]), tx)  # donated
+    step = jax.jit(make_ae_train_step(FULL, tx), donate_argnums=(0,))
     batch = {"upper": _smooth_motion(10, 4, 64, 39), "lower": _smooth_motion(11, 4, 64, 24)}
-    key = jax.random.PRNGKey(0)
+    key = jax.random.key(0)
     state, first = step(state, batch, key)
     for _ in range(29):
         state, metrics = step(state, batch, key)
@@ -282,10 +283,10 @@ def test_ae_loss_decreases(params):
 
 def test_transformer_loss_decreases(params):
     tx = optax.adam(1e-3)
-    state = create_transformer_state(CFG, jax.tree_util.tree_map(jnp.copy, params["transformer"]), tx)
-    step = jax.jit(make_transformer_train_step(CFG, tx, params["autoencoder"]), donate_argnums=(0,))
+    state = create_transformer_state(FULL, jax.tree_util.tree_map(jnp.copy, params["transformer"]), tx)
+    step = jax.jit(make_transformer_train_step(FULL, tx, params["autoencoder"]), donate_argnums=(0,))
     batch = {"content": _smooth_motion(12, 2, 64, 39), "style": _smooth_motion(13, 2, 48, 39)}
-    key = jax.random.PRNGKey(0)
+    key = jax.random.key(0)
     state, first = step(state, batch, key)
     for _ in range(29):
         state, metrics = step(state, batch, key)
@@ -349,10 +350,10 @@ def test_swap_options_run_and_keep_the_simplex(params, similarity, positions):
 
 
 def test_standardized_autoencoder_statistics_are_frozen():
-    from jaxgest.tgst.steps import ae_loss_terms
+    from jaxgest.tgst.losses import ae_loss_terms
 
     cfg = dataclasses.replace(CFG, autoencoder=dataclasses.replace(CFG.autoencoder, standardize=True))
-    p = init_params(cfg, jax.random.PRNGKey(0))["autoencoder"]
+    p = init_params(cfg, jax.random.key(0))["autoencoder"]
     stats = {"upper_mean": jnp.full((39,), 0.3), "upper_std": jnp.full((39,), 2.0),
              "lower_mean": jnp.full((24,), -0.2), "lower_std": jnp.full((24,), 0.5)}
     p = dict(p, **stats)
@@ -372,18 +373,21 @@ def test_standardized_autoencoder_statistics_are_frozen():
     assert not np.allclose(np.asarray(up), np.asarray(up0))
 
 
-def test_stored_config_without_new_fields_keeps_old_behaviour():
-    from jaxgest.tgst.config import with_stored_defaults
+def test_flat_config_of_older_versions_maps_to_the_split_with_old_defaults():
+    from jaxgest.tgst.config import legacy_to_dict
 
-    new = get_config("paper")
-    old = dataclasses.asdict(new)
-    for k in ("edge_frames", "swap_similarity", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling"):
+    new = preset("paper")
+    old = {"name": "paper", **new.model.to_dict(), "ae_window": 192, "use_cyclic": False, "ae_mirror": False}
+    for k in ("edge_frames", "swap_similarity"):  # fields added later: absent in the oldest workdirs
         old.pop(k)
     old["transformer"].pop("token_positions")
     old["autoencoder"].pop("standardize")
-    cfg = with_stored_defaults(new, old)
-    assert cfg.edge_frames == 0 and cfg.swap_similarity == "dot" and cfg.transformer.token_positions == "index"
-    assert with_stored_defaults(new, dataclasses.asdict(new)) == new
+    cfg = Config.from_dict(json.loads(json.dumps(old)))
+    m = cfg.model
+    assert m.edge_frames == 0 and m.swap_similarity == "dot" and m.transformer.token_positions == "index"
+    assert cfg.train.autoencoder.window == 192 and not cfg.train.autoencoder.mirror
+    assert not cfg.train.transformer.use_cyclic and cfg.train.transformer.use_identity
+    assert legacy_to_dict(old)["model"]["fps"] == new.model.fps
 
 
 def test_content_balanced_window_sampling():
@@ -400,10 +404,13 @@ def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
     from jaxgest.errors import JaxgestError
     from jaxgest.tgst.train import apply_overrides
 
-    cfg = apply_overrides(get_config("fit"), {"swap_similarity": "scaled", "transformer.token_positions": "index",
-                                              "autoencoder.standardize": False})
-    assert cfg.swap_similarity == "scaled" and cfg.transformer.token_positions == "index"
-    assert not cfg.autoencoder.standardize and cfg.edge_frames == 16
+    cfg = apply_overrides(preset("fit"), {"swap_similarity": "scaled", "transformer.token_positions": "index",
+                                          "model.autoencoder.standardize": False, "train.autoencoder.window": 32,
+                                          "ae_batch_size": 2})
+    m = cfg.model
+    assert m.swap_similarity == "scaled" and m.transformer.token_positions == "index"
+    assert not m.autoencoder.standardize and m.edge_frames == 16
+    assert cfg.train.autoencoder.window == 32 and cfg.train.autoencoder.batch_size == 2
     assert apply_overrides(TINY, None) == TINY
     with pytest.raises(JaxgestError, match="override"):
         apply_overrides(TINY, {"swap_similarity": "cosine"})
@@ -415,37 +422,41 @@ def test_ae_batch_without_mirrored_clips():
     mup = [np.full((80, 39), -1.0 - i, np.float32) for i in range(3)]  # mirrored copies: negative values
     data = tdata.BodyData(up, lo, mup, lo, ["a", "b", "c"], 60.0, ["x", "x", "y"])
     for mirror in (True, False):
-        cfg = dataclasses.replace(TINY, ae_mirror=mirror, ae_batch_size=64, ae_sampling="content")
+        ae = dataclasses.replace(TINY.train.autoencoder, mirror=mirror, batch_size=64, sampling="content")
+        cfg = dataclasses.replace(TINY, train=dataclasses.replace(TINY.train, autoencoder=ae))
         b = tdata.ae_batch(data, cfg, 0, 0)["upper"]
-        assert b.shape == (64, cfg.ae_window, 39)
+        assert b.shape == (64, ae.window, 39)
         assert bool((b < 0).any()) == mirror
 
 
-def test_checkpoint_of_an_older_version_still_matches(tmp_path):
-    """A checkpoint whose config predates the added fields resumes/loads with a config that has them at their
-    old defaults; another value of such a field is still reported as a mismatch."""
+def test_checkpoints_check_only_the_model_config(tmp_path):
+    """The autoencoder checkpoint checks the autoencoder's part of the model config: other training settings or
+    transformer sizes share it, another autoencoder setting is a mismatch naming the field. A checkpoint of the
+    flat layout of older versions (whole config, fields it predates absent) matches the same model."""
     import types
 
     from jaxgest import training
     from jaxgest.errors import CheckpointError
-    from jaxgest.tgst.config import with_stored_defaults
-    from jaxgest.tgst.train import AE_IGNORED, AE_KIND, AE_SUBDIR, ae_checkpointer
+    from jaxgest.tgst.workdir import AE_KIND, AE_SUBDIR, ae_checkpointer
 
-    old = dataclasses.asdict(TINY)
-    for k in ("edge_frames", "swap_similarity", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling", "ae_mirror"):
-        old.pop(k)
+    def save(folder, config):
+        with training.Checkpointer(folder, kind=AE_KIND, config=config, skeleton=tdata.BODY_SIGNATURE,
+                                   subdir=AE_SUBDIR) as ck:
+            ck.save(types.SimpleNamespace(params={"w": jnp.ones(3)}, opt_state={}, step=jnp.asarray(5)))
+
+    def check(folder, model):
+        with ae_checkpointer(folder, model, read_only=True) as probe:
+            probe.check_meta(probe.stored_meta())
+
+    save(tmp_path / "new", TINY.model.autoencoder_dict())
+    check(tmp_path / "new", dataclasses.replace(TINY.model, swap_similarity="scaled"))  # transformer side: shared
+    with pytest.raises(CheckpointError, match="edge_frames"):
+        check(tmp_path / "new", dataclasses.replace(TINY.model, edge_frames=0))
+    old = {"name": "tiny", **TINY.model.to_dict(), "ae_window": 64, "ae_learning_rate": 1e-3}
+    old.pop("swap_similarity")
     old["autoencoder"].pop("standardize")
-    old["transformer"].pop("token_positions")
-    ck = training.Checkpointer(tmp_path, kind=AE_KIND, config=old, skeleton=tdata.BODY_SIGNATURE, subdir=AE_SUBDIR,
-                               ignore=AE_IGNORED)
-    ck.save(types.SimpleNamespace(params={"w": jnp.ones(3)}, opt_state={}, step=jnp.asarray(5)))
-    ck.close()
-    cfg = with_stored_defaults(get_config("tiny"), old)  # edge_frames 0 etc.: the old behaviour
-    assert cfg.edge_frames == 0 and cfg.ae_mirror
-    probe = ae_checkpointer(tmp_path, cfg, read_only=True)
-    probe.check_meta(probe.stored_meta())  # no mismatch
-    probe.close()
-    probe = ae_checkpointer(tmp_path, dataclasses.replace(cfg, ae_mirror=False), read_only=True)
-    with pytest.raises(CheckpointError, match="ae_mirror"):
-        probe.check_meta(probe.stored_meta())
-    probe.close()
+    save(tmp_path / "old", json.loads(json.dumps(old)))
+    check(tmp_path / "old", TINY.model)
+    with pytest.raises(CheckpointError, match="standardize"):
+        check(tmp_path / "old", dataclasses.replace(
+            TINY.model, autoencoder=dataclasses.replace(TINY.model.autoencoder, standardize=True)))

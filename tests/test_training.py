@@ -103,3 +103,30 @@ def test_non_finite_loss_stops_and_keeps_last_good(tmp_path, key):
 def test_config_diff_nested():
     assert config_diff({"a": 1, "m": {"x": 1}}, {"a": 1, "m": {"x": 2}}) == ["m.x: 1 -> 2"]
     assert config_diff({"a": 1}, {"a": 1}) == []
+
+
+def test_checkpointer_has_no_process_wide_side_effects(tmp_path, monkeypatch):
+    """The unraisable-hook filter lives only while a Checkpointer is open; absl's level is left as it was.
+    (``jaxgest.cli.main`` installs the filter for its whole process, so the test starts from a clean state.)"""
+    import logging
+    import sys
+
+    from jaxgest import checkpoint
+
+    def hook(unraisable):  # stands for whatever the process had installed
+        pass
+
+    monkeypatch.setattr(checkpoint, "_MUTE_DEPTH", 0)
+    monkeypatch.setattr(sys, "unraisablehook", hook)
+    level = logging.getLogger("absl").level
+    ck = Checkpointer(tmp_path, kind="toy", config={"lr": 0.1})
+    assert sys.unraisablehook is checkpoint._closed_loop_hook  # installed while open
+    with Checkpointer(tmp_path, kind="toy", config={"lr": 0.1}, read_only=True) as ro:  # nested: one filter
+        assert ro.latest_step() is None
+    assert sys.unraisablehook is checkpoint._closed_loop_hook
+    ck.close()
+    assert sys.unraisablehook is hook and logging.getLogger("absl").level == level
+    with checkpoint.closed_loop_errors_muted():
+        seen = []
+        sys.unraisablehook = seen.append  # someone else replaces it meanwhile
+    assert sys.unraisablehook == seen.append  # not clobbered on exit

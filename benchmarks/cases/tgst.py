@@ -21,7 +21,7 @@ from jaxgest.tgst.config import get_config
 STYLE_FRAMES = 1280
 
 
-CFG = get_config("paper")
+CFG = get_config("paper").model
 
 
 @functools.lru_cache(maxsize=None)

@@ -39,7 +39,7 @@ from jaxgest.zeggs.model import ZeggsModel
 
 @functools.lru_cache(maxsize=None)
 def _tgst_params():
-    return jax.jit(lambda k: TM.init_params(tgst_config("paper"), k))(jax.random.PRNGKey(0))
+    return jax.jit(lambda k: TM.init_params(tgst_config("paper").model, k))(jax.random.PRNGKey(0))
 
 
 def _f32(rng, shape, scale=1.0):
@@ -48,14 +48,14 @@ def _f32(rng, shape, scale=1.0):
 
 def tgst_ae_case() -> Case:
     cfg = tgst_config("paper")
-    tx = optax.adam(cfg.ae_learning_rate)
-    b, f = cfg.ae_batch_size, cfg.ae_window
+    tx = optax.adam(cfg.train.autoencoder.learning_rate)
+    b, f = cfg.train.autoencoder.batch_size, cfg.train.autoencoder.window
 
     def make_args():
         state = TS.create_ae_state(cfg, _tgst_params()["autoencoder"], tx)
         rng = np.random.default_rng(1)
-        batch = {"upper": _f32(rng, (b, f, cfg.autoencoder.upper_channels), 0.4),
-                 "lower": _f32(rng, (b, f, cfg.autoencoder.lower_channels), 0.4)}
+        batch = {"upper": _f32(rng, (b, f, cfg.model.autoencoder.upper_channels), 0.4),
+                 "lower": _f32(rng, (b, f, cfg.model.autoencoder.lower_channels), 0.4)}
         return state, batch, jax.random.PRNGKey(0)
 
     return Case(name="train_tgst_autoencoder", batch=b, frames=f,
@@ -65,8 +65,8 @@ def tgst_ae_case() -> Case:
 
 def tgst_transformer_case() -> Case:
     cfg = tgst_config("paper")
-    tx = optax.adam(cfg.transformer_learning_rate)
-    b, f = cfg.transformer_batch_size, cfg.transformer_window
+    tx = optax.adam(cfg.train.transformer.learning_rate)
+    b, f = cfg.train.transformer.batch_size, cfg.train.transformer.window
 
     def step(state, batch, key, ae_params):
         # ae_params as an argument (as jaxgest.tgst.train does): a closed-over pytree would be baked into
@@ -77,7 +77,7 @@ def tgst_transformer_case() -> Case:
         p = _tgst_params()
         state = TS.create_transformer_state(cfg, p["transformer"], tx)
         rng = np.random.default_rng(2)
-        c = cfg.autoencoder.upper_channels
+        c = cfg.model.autoencoder.upper_channels
         batch = {"content": _f32(rng, (b, f, c), 0.4), "style": _f32(rng, (b, f, c), 0.4)}
         return state, batch, jax.random.PRNGKey(0), p["autoencoder"]
 

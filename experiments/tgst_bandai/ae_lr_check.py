@@ -13,7 +13,7 @@ from jaxgest.tgst.steps import create_ae_state, make_ae_train_step
 cfg0 = get_config("paper")
 bd = tdata.load_body_data("../shared/data/bandai-namco-1", cfg0)
 cfg = tdata.fit_windows(cfg0, bd)
-p0 = init_params(cfg, jax.random.PRNGKey(0))
+p0 = init_params(cfg.model, jax.random.PRNGKey(0))
 for lr in (1e-4, 1e-3):
     tx = optax.adam(lr)
     st = create_ae_state(cfg, p0["autoencoder"], tx)

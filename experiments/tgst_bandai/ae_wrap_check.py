@@ -48,7 +48,7 @@ print(mode, "joint-frames with a jump > 0.5 rad:", sum(int((j > 0.5).sum()) for 
       sum(j.size for j in jumps))
 print(mode, "max angle per joint", np.round(n.max(0), 2), "max frame jump", np.round(max(np.abs(np.diff(np.concatenate([u, l], 1), axis=0)).max() for u, l in zip(bd.upper, bd.lower)), 2))
 cfg = tdata.fit_windows(cfg0, bd)
-p0 = init_params(cfg, jax.random.PRNGKey(0))
+p0 = init_params(cfg.model, jax.random.PRNGKey(0))
 lr = float(sys.argv[2])
 tx = optax.adam(lr)
 st = create_ae_state(cfg, p0["autoencoder"], tx)

@@ -48,7 +48,7 @@ def load_params(workdir, ae_step=None, transformer=True):
     from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
 
     stored = json.loads((pathlib.Path(workdir) / "config.json").read_text())
-    cfg = config_from_dict(stored["config"])
+    cfg = config_from_dict(stored["config"]).model
     template = jax.eval_shape(lambda k: tmodel.init_params(cfg, k), jax.random.PRNGKey(0))
     ck = ae_checkpointer(workdir, cfg, read_only=True)
     params = {"autoencoder": ck.restore_params(template["autoencoder"], step=ae_step)}
@@ -92,7 +92,8 @@ def main(argv) -> int:
         return tuple(a[:, :f] for a in rec_jit(p, u))
     clips = datasets.load_folder(args.eval_dir, progress=False)
     held = [body_upper_lower(c.motion, cfg.fps) for c in clips]
-    report = {"workdir": args.workdir, "config": cfg.name, "ae_step": args.ae_step, "num_clips": len(clips),
+    preset = json.loads(open(f"{args.workdir}/config.json").read())["preset"]
+    report = {"workdir": args.workdir, "config": preset, "ae_step": args.ae_step, "num_clips": len(clips),
               "edge_frames": cfg.edge_frames}
 
     # ---- 1. angles: AE vs PCA-16 vs mean pose

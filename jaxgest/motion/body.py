@@ -47,13 +47,31 @@ MAPS_DIR = pathlib.Path(__file__).with_name("maps")
 
 
 @functools.lru_cache(maxsize=None)
-def load_map(name: str) -> dict:
-    """The joint map ``name`` (``maps/{name}.json``): ``{"joints": {body_joint: rig_joint}, ...}``."""
+def _map_text(name: str) -> str:
     path = MAPS_DIR / f"{name}.json"
     if not path.is_file():
         known = ", ".join(sorted(p.stem for p in MAPS_DIR.glob("*.json")))
         raise DataError(f"no joint map named {name!r} (known: {known})")
-    return json.loads(path.read_text())
+    return path.read_text()
+
+
+def load_map(name: str) -> dict:
+    """The joint map ``name`` (``maps/{name}.json``): ``{"joints": {body_joint: rig_joint}, ...}``.
+
+    A new dict on every call (the file's text is read once): a caller may change its copy freely.
+    """
+    return json.loads(_map_text(name))
+
+
+def rig_joints(skeleton: Skeleton, names=BODY) -> list[str]:
+    """The names in ``skeleton``'s rig of the body joints ``names`` (through its joint map)."""
+    joints = load_map(detect_map(skeleton))["joints"]
+    return [joints[n] for n in names]
+
+
+def joint_indices(skeleton: Skeleton, names=BODY) -> list[int]:
+    """The indices in ``skeleton`` of the body joints ``names`` (e.g. :data:`HANDS`, :data:`ARMS`)."""
+    return [skeleton.index(j) for j in rig_joints(skeleton, names)]
 
 
 def available_maps() -> list[str]:

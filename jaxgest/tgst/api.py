@@ -1,7 +1,8 @@
 """Public TGST entry points (SPEC.md §7): parameter counts, loading a trained workdir, Motion-level transfer.
 
 * :func:`count_params` -- parameter counts of a fresh model of a preset (shapes only).
-* :func:`load_model` -- a :class:`TGSTModel` from a workdir written by ``jaxgest tgst train``.
+* :func:`load_model` -- a :class:`TGSTModel` from a workdir written by ``jaxgest tgst train``
+  (checkpoints found through :mod:`jaxgest.tgst.workdir`; :class:`ModelCache` keeps loaded ones).
 * :func:`transfer` -- ``transfer(content, style, *, workdir, method)``: what ``jaxgest tgst transfer`` calls.
 
 Transfer of two :class:`~jaxgest.motion.skeleton.Motion` clips on any mapped rig (Bandai-Namco, ZEGGS, the
@@ -32,12 +33,14 @@ from typing import Optional
 import jax
 import numpy as np
 
-from jaxgest.errors import CheckpointError, DataError
+from jaxgest.errors import DataError
 from jaxgest.motion import body, datasets
 from jaxgest.motion import kinematics as K
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion
-from jaxgest.tgst.config import TGSTConfig, config_from_dict, get_config
+from jaxgest.tgst import workdir as W
+from jaxgest.tgst.config import Config, ModelConfig
+from jaxgest.tgst.config import preset as preset_config
 from jaxgest.tgst.model import METHODS, init_params, transfer_arrays
 
 
@@ -46,15 +49,18 @@ def count_params(preset: str = "paper") -> dict[str, int]:
 
     Computed with ``jax.eval_shape`` (no weights are materialised). Paper: 23,743 and 50,240.
     """
-    cfg = get_config(preset)
-    shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
+    cfg = preset_config(preset).model
+    shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.key(0))
     return {name: int(sum(x.size for x in jax.tree_util.tree_leaves(tree))) for name, tree in shapes.items()}
 
 
-@functools.lru_cache(maxsize=8)
-def compiled_transfer(cfg: TGSTConfig, method: str):
-    """``jax.jit`` of :func:`transfer_arrays` for one (config, method); one compilation per clip shape."""
-    return jax.jit(functools.partial(transfer_arrays, cfg=cfg, method=method))
+#: :func:`transfer_arrays` under ``jax.jit``; jit's own cache keeps one compilation per (config, method, shapes)
+_transfer_jit = jax.jit(transfer_arrays, static_argnames=("cfg", "method"))
+
+
+def compiled_transfer(cfg: ModelConfig, method: str):
+    """The jit-compiled :func:`transfer_arrays` of one (config, method); one compilation per clip shape."""
+    return functools.partial(_transfer_jit, cfg=cfg, method=method)
 
 
 def _check_method(method: str) -> None:
@@ -81,13 +87,20 @@ class TGSTModel:
     """A trained TGST model: config and both parameter pytrees; ``transfer`` works on Motions.
 
     Attributes:
-      cfg: the :class:`TGSTConfig` the workdir was trained with (windows fitted to its data).
+      cfg: the :class:`~jaxgest.tgst.config.ModelConfig` of the networks.
       params: ``{"autoencoder": ..., "transformer": ...}``.
       workdir: where it was loaded from (None when built from parameters).
+      config: the whole :class:`~jaxgest.tgst.config.Config` the workdir was trained with (None when built
+        from parameters).
+      steps: the checkpoint step of each stage that was loaded (``{}`` when built from parameters).
     """
 
-    def __init__(self, cfg: TGSTConfig, params: dict, workdir=None):
+    def __init__(self, cfg: ModelConfig, params: dict, workdir=None, *, config: Optional[Config] = None,
+                 steps: Optional[dict] = None):
+        if isinstance(cfg, Config):  # a whole preset: its model
+            config, cfg = cfg if config is None else config, cfg.model
         self.cfg, self.params, self.workdir = cfg, params, workdir
+        self.config, self.steps = config, dict(steps or {})
 
     def min_frames(self, fps: float) -> int:
         """Shortest clip (frames at ``fps``) the model accepts: one token (16 frames) at the model rate."""
@@ -139,8 +152,7 @@ class TGSTModel:
 
 def foot_names(skeleton) -> list[str]:
     """The rig's foot and toe joints of the 21-joint body (``body.FEET`` through its joint map)."""
-    joints = body.load_map(body.detect_map(skeleton))["joints"]
-    return [joints[n] for n in body.FEET]
+    return body.rig_joints(skeleton, body.FEET)
 
 
 def content_floor_contact(result: Motion, content: Motion) -> Motion:
@@ -156,46 +168,49 @@ def content_floor_contact(result: Motion, content: Motion) -> Motion:
 
 
 def load_model(workdir) -> TGSTModel:
-    """Load the latest autoencoder and transformer checkpoints of a ``jaxgest tgst train`` workdir.
+    """Load the newest readable autoencoder and transformer checkpoints of a ``jaxgest tgst train`` workdir.
 
-    Cached per workdir and config.json time (training rewrites it), so the CLI, the pipeline and repeated
-    :func:`transfer` calls restore each checkpoint once. Raises CheckpointError when the workdir has no
-    config.json or no checkpoint of either stage, or when the checkpoints do not match its config.
+    Not cached: every call restores the checkpoints (a long-lived caller keeps the returned model, or uses
+    :class:`ModelCache`). Raises CheckpointError when the workdir has no config.json or no checkpoint of
+    either stage, or when the checkpoints do not match its config.
     """
-    workdir = pathlib.Path(workdir)
-    cfg_path = workdir / "config.json"
-    if not cfg_path.is_file():
-        raise CheckpointError(f"{workdir}: not a TGST workdir (no config.json; run 'jaxgest tgst train' first)")
-    return _load_cached(str(workdir.resolve()), cfg_path.stat().st_mtime_ns, str(workdir))
+    config = W.read_config(workdir)
+    params, steps = W.restore_params(workdir, config.model)
+    return TGSTModel(config.model, params, workdir, config=config, steps=steps)
 
 
-@functools.lru_cache(maxsize=4)
-def _load_cached(resolved: str, mtime_ns: int, given: str) -> TGSTModel:
-    """:func:`load_model` keyed by the resolved path and config time (``given`` names it in errors)."""
-    from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
+class ModelCache:
+    """An explicit cache of loaded models, keyed on the workdir and the checkpoint step of both stages.
 
-    workdir = pathlib.Path(given)
-    cfg_path = workdir / "config.json"
-    from jaxgest.training import check_workdir_config
+    ``cache.get(workdir)`` lists the checkpoint steps (no arrays are read) and restores only when a stage has
+    a newer (or other) step than the cached model, so a workdir retrained meanwhile is reloaded and an
+    unchanged one is not. Owned by its caller (no module-level state); holds at most ``size`` models.
+    """
 
-    try:
-        stored = check_workdir_config(workdir)  # one line for an unreadable, newer or unknown config.json
-        # ZeroEGGS workdirs name their model under "model"; check the kind before reading a TGST config
-        kind = stored.get("kind", stored.get("model", "tgst"))
-        if kind != "tgst":
-            raise CheckpointError(f"{workdir}: a {kind} workdir, not a TGST one (train one with 'jaxgest tgst "
-                                  "train')")
-        cfg = config_from_dict(stored["config"])
-    except (ValueError, KeyError, TypeError, AttributeError) as e:
-        raise CheckpointError(f"{cfg_path}: unreadable TGST config ({type(e).__name__}: {e})") from None
-    template = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))  # shapes only
-    ae_ck = ae_checkpointer(workdir, cfg, read_only=True)
-    ae = ae_ck.restore_params(template["autoencoder"])
-    ae_ck.close()
-    tr_ck = transformer_checkpointer(workdir, cfg, None, read_only=True)
-    tr = tr_ck.restore_params(template["transformer"])
-    tr_ck.close()
-    return TGSTModel(cfg, {"autoencoder": ae, "transformer": tr}, workdir)
+    def __init__(self, size: int = 4):
+        self.size = int(size)
+        self._models: dict = {}
+
+    def get(self, workdir) -> TGSTModel:
+        path = pathlib.Path(workdir).resolve()
+        key = (str(path), _checkpoint_steps(workdir))
+        model = self._models.pop(key, None)
+        if model is None:
+            model = load_model(workdir)
+            self._models = {k: v for k, v in self._models.items() if k[0] != key[0]}  # older steps
+        self._models[key] = model  # most recently used last
+        while len(self._models) > self.size:
+            self._models.pop(next(iter(self._models)))
+        return model
+
+
+def _checkpoint_steps(workdir) -> tuple:
+    """The checkpoint step folders of both stages (cheap: a directory listing)."""
+    out = []
+    for sub in (W.AE_SUBDIR, W.TRANSFORMER_SUBDIR):
+        d = pathlib.Path(workdir) / sub
+        out.append(tuple(sorted(int(p.name) for p in d.iterdir() if p.name.isdigit())) if d.is_dir() else ())
+    return tuple(out)
 
 
 def transfer(content: Motion, style: Motion, *, workdir, method: str = "soft") -> Motion:
@@ -204,5 +219,5 @@ def transfer(content: Motion, style: Motion, *, workdir, method: str = "soft") -
     return load_model(workdir).transfer(content, style, method=method)
 
 
-__all__ = ["METHODS", "TGSTModel", "compiled_transfer", "content_floor_contact", "count_params", "foot_names",
-           "load_model", "resample_body", "transfer"]
+__all__ = ["METHODS", "ModelCache", "TGSTModel", "compiled_transfer", "content_floor_contact", "count_params",
+           "foot_names", "load_model", "resample_body", "transfer"]

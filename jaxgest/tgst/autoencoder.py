@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgest.motion import rotations
+from jaxgest.nn import safe_norm
 from jaxgest.tgst.config import AutoencoderConfig
 
 
@@ -88,21 +89,14 @@ class MotionAutoencoder(nn.Module):
             upsample=(1,) * n_enc,
             final_activation=True,
         )
-        ones = (1,) * len(c.decoder_kernels)
-        self.upper_decoder = _ConvStack(
-            features=tuple(c.upper_decoder_channels) + (c.upper_channels,),
-            kernels=tuple(c.decoder_kernels),
-            strides=ones,
-            upsample=tuple(c.decoder_upsample),
-            final_activation=False,
-        )
-        self.lower_decoder = _ConvStack(
-            features=tuple(c.lower_decoder_channels) + (c.lower_channels,),
-            kernels=tuple(c.decoder_kernels),
-            strides=ones,
-            upsample=tuple(c.decoder_upsample),
-            final_activation=False,
-        )
+
+        def decoder(hidden, out: int) -> _ConvStack:  # the two decoders differ only in their widths
+            return _ConvStack(features=tuple(hidden) + (out,), kernels=tuple(c.decoder_kernels),
+                              strides=(1,) * len(c.decoder_kernels), upsample=tuple(c.decoder_upsample),
+                              final_activation=False)
+
+        self.upper_decoder = decoder(c.upper_decoder_channels, c.upper_channels)
+        self.lower_decoder = decoder(c.lower_decoder_channels, c.lower_channels)
 
         if c.standardize:  # frozen data statistics (set by training, never updated: stop_gradient below)
             zeros, ones = nn.initializers.zeros, nn.initializers.ones
@@ -124,34 +118,25 @@ class MotionAutoencoder(nn.Module):
             upper = (upper - mean) / std
         return self.encoder(upper)
 
-    def decode_upper(self, z: jax.Array) -> jax.Array:
-        """Latents ``(batch, T, 16)`` -> upper-body exp-maps ``(batch, 4T, 39)``."""
+    def _decode(self, decoder, part: str, z: jax.Array) -> jax.Array:
         chex.assert_rank(z, 3)
-        y = self.upper_decoder(z)
+        y = decoder(z)
         if self.config.standardize:
-            mean, std = self._stats("upper")
+            mean, std = self._stats(part)
             y = mean + std * y
         return y
 
+    def decode_upper(self, z: jax.Array) -> jax.Array:
+        """Latents ``(batch, T, 16)`` -> upper-body exp-maps ``(batch, 4T, 39)``."""
+        return self._decode(self.upper_decoder, "upper", z)
+
     def decode_lower(self, z: jax.Array) -> jax.Array:
         """Latents ``(batch, T, 16)`` -> lower-body exp-maps ``(batch, 4T, 24)``."""
-        chex.assert_rank(z, 3)
-        y = self.lower_decoder(z)
-        if self.config.standardize:
-            mean, std = self._stats("lower")
-            y = mean + std * y
-        return y
+        return self._decode(self.lower_decoder, "lower", z)
 
     def __call__(self, upper: jax.Array):
         z = self.encode(upper)
         return (self.decode_upper(z), self.decode_lower(z)), {"latents": z}
-
-
-def _safe_norm(x: jax.Array, axis: int = -1) -> jax.Array:
-    """L2 norm with a zero (not NaN) gradient at 0, like ``torch.norm``."""
-    sq = jnp.sum(x * x, axis=axis)
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
 def expmap_reconstruction_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
@@ -165,7 +150,7 @@ def expmap_reconstruction_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
     chex.assert_equal_shape([pred, target])
     b, f, c = pred.shape
     d = (pred - target).reshape(b, f, c // 3, 3)
-    return jnp.mean(_safe_norm(d), axis=(1, 2))
+    return jnp.mean(safe_norm(d), axis=(1, 2))
 
 
 def angular_error_rad(pred: jax.Array, target: jax.Array) -> jax.Array:

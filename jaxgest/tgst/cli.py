@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pathlib
 
+from jaxgest.cli import add_train_arguments, training_data
 from jaxgest.errors import DataError
-from jaxgest.tgst.config import PRESETS
+from jaxgest.tgst.config import PRESETS, InferenceConfig
 from jaxgest.tgst.model import METHODS
 
 
@@ -15,18 +16,13 @@ def register(subparsers) -> None:
     p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
 
     t = sub.add_parser("train", help="train (or resume) the autoencoder, then the style transformer")
-    t.add_argument("--data", default=None, help="folder: Bandai-Namco files, ZEGGS layout or manifest.csv "
-                   "(default: the built-in synthetic data, written to W/synthetic-data)")
-    t.add_argument("--workdir", required=True, help="run folder (config.json, checkpoints, metrics.jsonl)")
-    t.add_argument("--preset", default="tiny", choices=PRESETS)
-    t.add_argument("--steps", type=int, default=None,
-                   help="steps of EACH stage (default: tiny 200, paper 10000); see also --ae-steps")
+    add_train_arguments(
+        t, presets=PRESETS, workdir_help="run folder (config.json, checkpoints, metrics.jsonl)",
+        data_help="folder: Bandai-Namco files, ZEGGS layout or manifest.csv (default: the built-in synthetic "
+        "data, written to W/synthetic-data)",
+        steps_help="steps of EACH stage (default: tiny 200, paper 10000); see also --ae-steps")
     t.add_argument("--ae-steps", type=int, default=None, help="autoencoder steps (overrides --steps)")
     t.add_argument("--transformer-steps", type=int, default=None, help="transformer steps (overrides --steps)")
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
-    t.add_argument("--ckpt-every", type=int, default=500, help="checkpoint every N steps (and at the end)")
-    t.add_argument("--log-every", type=int, default=50, help="metrics.jsonl line every N steps")
     t.add_argument("--ablate", default=None, metavar="TERM[,TERM]",
                    help="switch loss terms off (identity, cyclic, structure, appearance): paper Table 4")
     t.set_defaults(func=_train)
@@ -36,7 +32,7 @@ def register(subparsers) -> None:
     x.add_argument("--content", required=True, metavar="C.bvh")
     x.add_argument("--style", required=True, metavar="S.bvh")
     x.add_argument("--out", required=True, metavar="O.bvh", help="output BVH (content's skeleton and length)")
-    x.add_argument("--method", default="soft", choices=METHODS,
+    x.add_argument("--method", default=InferenceConfig.method, choices=METHODS,
                    help="soft swap (paper), hard swap, AdaIN or Avatar-net baselines")
     x.set_defaults(func=_transfer)
 
@@ -49,8 +45,9 @@ def _train(args) -> int:
     ae = args.ae_steps if args.ae_steps is not None else args.steps
     tr = args.transformer_steps if args.transformer_steps is not None else args.steps
     ablate = tuple(a.strip() for a in args.ablate.split(",") if a.strip()) if args.ablate else ()
-    summary = train(args.data, args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr, seed=args.seed,
-                    devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every, ablate=ablate)
+    summary = train(training_data(args), args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr,
+                    seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
+                    ablate=ablate)
     print(format_summary(summary))
     return 0
 

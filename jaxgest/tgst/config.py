@@ -1,6 +1,24 @@
-"""Configuration of tokenized gesture style transfer (Kuriyama et al. 2022): models and training.
+"""Configuration of tokenized gesture style transfer (Kuriyama et al. 2022): model, training, inference.
 
-Presets (``get_config(name)``):
+A preset (:class:`Config`, ``preset(name)``) is three separate frozen dataclasses:
+
+* :class:`ModelConfig` -- what the trained networks *are*: the autoencoder and transformer sizes
+  (:class:`AutoencoderConfig`, :class:`TransformerConfig`), the model frame rate, token width/stride, clip
+  padding (``edge_frames``) and the soft swap (similarity and temperature). Checkpoints store and check only
+  this (the autoencoder checkpoint :meth:`ModelConfig.autoencoder_dict`, the transformer checkpoint all of it
+  plus the autoencoder step it was trained on), so changing a training or inference setting never blocks a
+  resume or a transfer.
+* :class:`TrainConfig` -- how each stage is trained: :class:`AutoencoderTrainConfig` (optimiser, schedule,
+  batch, window, sampling, mirroring) and :class:`TransformerTrainConfig` (optimiser, batch, window, the loss
+  weights and switches of eq. 12).
+* :class:`InferenceConfig` -- settings used only when transferring (the default method, the length buckets
+  of batched evaluation).
+
+The swap temperature is a model setting, not an inference one: the paper's eq. 4 has none (temperature 1)
+and the same soft swap is used inside the training losses (identity and cyclic terms, eqs. 5-8), so the
+transformer is fitted to one temperature; changing it changes the trained function.
+
+Presets (``preset(name)``):
 
 * ``"paper"`` -- the published sizes (App. A, §3.3-3.5): autoencoder 23,743 parameters, transformer 50,240
   (one LayerNorm per block shared by both residuals, as in the authors' code; ``layernorms_per_block=2``
@@ -16,17 +34,18 @@ Presets (``get_config(name)``):
   content label equally often); the transformer's tokens carry no positions (``token_positions="none"``,
   as in the authors' code) so the soft swap matches tokens by content, not by index.
   Command: ``jaxgest tgst train --data DIR --workdir W --preset fit``. See experiments/tgst_bandai.
-* ``"tiny"`` -- the same (already tiny) widths, but short windows and small batches (AE window 64, batch 4;
-  transformer window 128, batch 4) and Adam 1e-3 so tests and ``jaxgest demo --quick`` train in seconds
-  to a minute on a CPU. Not the paper's training setup.
+* ``"tiny"`` -- the paper's model (the same :class:`ModelConfig`: the widths are already tiny) with short
+  windows and small batches (AE window 64, batch 4; transformer window 128, batch 4) and Adam 1e-3 so tests
+  and ``jaxgest demo --quick`` train in seconds to a minute on a CPU. Not the paper's training setup.
 
 Training windows are scaled to the data (:func:`jaxgest.tgst.data.fit_windows`): each window is
-``min(preset window, median clip length at cfg.fps rounded down to a multiple of 16)``, so the
+``min(preset window, median clip length at cfg.model.fps rounded down to a multiple of 16)``, so the
 Bandai-Namco clips (30 fps, mostly 4-15 s, resampled to 60 fps) train with the ``paper`` preset; the
-windows actually used are stored in the workdir's config.json and checkpoints.
+windows actually used are stored in the workdir's config.json.
 
 Every config is a frozen (hashable, usable as a jit static argument) dataclass of JSON-friendly fields:
-``dataclasses.asdict(cfg)`` is stored with checkpoints and :func:`config_from_dict` rebuilds it.
+``cfg.to_dict()`` is stored in config.json and :meth:`Config.from_dict` rebuilds it -- also from the flat
+config of workdirs written before this split (:func:`legacy_to_dict`), so they still load for transfer.
 """
 
 from __future__ import annotations
@@ -40,7 +59,8 @@ TOKEN_POSITIONS = ("index", "none")
 SWAP_SIMILARITIES = ("dot", "scaled")
 AE_LR_SCHEDULES = ("constant", "cosine")
 AE_SAMPLINGS = ("windows", "content")
-PRESETS = ("tiny", "paper", "fit")  # names accepted by get_config
+PRESETS = ("tiny", "paper", "fit")  # names accepted by preset()
+METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,10 +111,9 @@ class TransformerConfig:
 
 
 @dataclasses.dataclass(frozen=True)
-class TGSTConfig:
-    """Everything the TGST model and its two trainings need."""
+class ModelConfig:
+    """What a trained TGST model is: the networks, the data representation and the swap."""
 
-    name: str = "paper"  # preset name, informational
     fps: float = 60.0  # model frame rate: every clip is resampled to it (the paper's capture rate, §4.1)
     autoencoder: AutoencoderConfig = AutoencoderConfig()  # motion <-> latent autoencoder
     transformer: TransformerConfig = TransformerConfig()  # token encoder/decoder
@@ -102,31 +121,13 @@ class TGSTConfig:
     token_stride: int = 2  # h = w / 2: stride between tokens (half overlap, eq. 1)
     min_frames: int = 16  # shortest clip accepted (one token = w * 4 = 16 frames)
     frame_multiple: int = 16  # clips are padded at the end to a multiple of this many frames
-    lambda_identity: float = 1.0  # weight of L_identity (eq. 12 fixes it to 1; settable for ablations)
-    lambda_cyclic: float = 1.0  # lambda_c of eq. 12
-    lambda_structure: float = 1.0  # lambda_s of eq. 12
-    lambda_appearance: float = 1.0  # lambda_a of eq. 12
-    use_identity: bool = True  # switch L_identity on/off (ablation, Table 4)
-    use_cyclic: bool = True  # switch L_cyclic on/off
-    use_structure: bool = True  # switch L_structure on/off
-    use_appearance: bool = True  # switch L_appearance on/off
-    ae_learning_rate: float = 1e-4  # Adam learning rate of the autoencoder (§3.5)
-    ae_batch_size: int = 32  # autoencoder batch size (§3.5)
-    ae_window: int = 256  # autoencoder training window in frames (§3.5)
-    transformer_learning_rate: float = 1e-4  # Adam learning rate of the transformer (§3.5)
-    transformer_batch_size: int = 8  # content/style pairs per transformer batch (§3.5)
-    transformer_window: int = 1280  # frames per content/style training clip (§3.5)
-    swap_temperature: float = 1.0  # softmax temperature of the soft swap (1 = eq. 4)
-    # similarity of the swap: "dot" = plain dot product (eq. 4 as printed); "scaled" = both sides
-    # LayerNorm-ed (no parameters) and divided by sqrt(d_g) before the temperature
-    swap_similarity: str = "dot"
     # replicate-pad every clip by this many frames at BOTH ends before encoding and trim after decoding
     # (SPEC §3, clip ends); a multiple of the encoder's total stride. 0 = the end-only padding of old runs
     edge_frames: int = 0
-    ae_lr_schedule: str = "constant"  # "constant" (§3.5) or "cosine" (warm-up, cosine decay to 10 %)
-    ae_lr_decay_steps: int = 10_000  # length of the cosine schedule (steps); constant lr afterwards
-    ae_sampling: str = "windows"  # "windows": uniform over all windows; "content": each content label equally
-    ae_mirror: bool = True  # the autoencoder also sees the mirrored clips (False: the original clips only)
+    swap_temperature: float = 1.0  # softmax temperature of the soft swap (1 = eq. 4; also used in training)
+    # similarity of the swap: "dot" = plain dot product (eq. 4 as printed); "scaled" = both sides
+    # LayerNorm-ed (no parameters) and divided by sqrt(d_g) before the temperature
+    swap_similarity: str = "dot"
 
     def __post_init__(self):
         t = self.transformer
@@ -145,94 +146,191 @@ class TGSTConfig:
             raise ValueError(f"transformer.token_dim must be token_width * latent_dim = "
                              f"{self.token_width * self.autoencoder.latent_dim}, got {t.token_dim}")
         for name, value, allowed in (("transformer.token_positions", t.token_positions, TOKEN_POSITIONS),
-                                     ("swap_similarity", self.swap_similarity, SWAP_SIMILARITIES),
-                                     ("ae_lr_schedule", self.ae_lr_schedule, AE_LR_SCHEDULES),
-                                     ("ae_sampling", self.ae_sampling, AE_SAMPLINGS)):
+                                     ("swap_similarity", self.swap_similarity, SWAP_SIMILARITIES)):
             if value not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
         step = self.autoencoder.time_reduction * self.token_stride
         if self.edge_frames < 0 or self.edge_frames % step:
             raise ValueError(f"edge_frames must be a non-negative multiple of {step} (encoder stride x token "
                              f"stride, so tokens start at the clip's first frame), got {self.edge_frames}")
-        if self.frame_multiple % (self.autoencoder.time_reduction * self.token_stride):
+        if self.frame_multiple % step:
             raise ValueError("frame_multiple must be a multiple of time_reduction * token_stride")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
-
-def config_from_dict(d: Mapping[str, Any]) -> TGSTConfig:
-    """Inverse of ``dataclasses.asdict`` (JSON lists become tuples again)."""
-
-    def build(cls, m):
-        kwargs = {}
-        for f in dataclasses.fields(cls):
-            if f.name not in m:
-                continue
-            v = m[f.name]
-            if f.name == "autoencoder":
-                v = build(AutoencoderConfig, v)
-            elif f.name == "transformer":
-                v = build(TransformerConfig, v)
-            elif isinstance(v, list):
-                v = tuple(v)
-            kwargs[f.name] = v
-        return cls(**kwargs)
-
-    return build(TGSTConfig, d)
+    def autoencoder_dict(self) -> dict:
+        """The fields the trained autoencoder depends on (its checkpoint's config): its sizes, the frame rate
+        and the clip padding it was trained with. A stage-1 checkpoint is shared by runs that differ only in
+        the transformer, the swap or the training settings (the loss ablations of Table 4 reuse one)."""
+        d = self.to_dict()
+        return {k: d[k] for k in AUTOENCODER_FIELDS}
 
 
-#: fields added after the first checkpoints were written; a stored config without them was trained with the
-#: class defaults (the old behaviour), see :func:`with_stored_defaults`
-ADDED_FIELDS = ("swap_similarity", "edge_frames", "ae_lr_schedule", "ae_lr_decay_steps", "ae_sampling",
-                "ae_mirror")
-ADDED_TRANSFORMER_FIELDS = ("token_positions",)
-ADDED_AUTOENCODER_FIELDS = ("standardize",)
+#: the ModelConfig fields an autoencoder checkpoint stores and checks (:meth:`ModelConfig.autoencoder_dict`)
+AUTOENCODER_FIELDS = ("fps", "autoencoder", "min_frames", "frame_multiple", "edge_frames")
 
 
-def with_stored_defaults(cfg: TGSTConfig, stored: Mapping[str, Any] | None) -> TGSTConfig:
-    """``cfg`` with every field that ``stored`` (a checkpoint's config dict) predates set to its class default.
+@dataclasses.dataclass(frozen=True)
+class AutoencoderTrainConfig:
+    """Training of stage 1, the motion autoencoder (§3.5)."""
 
-    A workdir trained before a field existed keeps the behaviour it was trained with (and resumes), whatever
-    the preset now says for new runs.
+    learning_rate: float = 1e-4  # Adam learning rate (§3.5)
+    batch_size: int = 32  # windows per batch (§3.5)
+    window: int = 256  # training window in frames (§3.5)
+    lr_schedule: str = "constant"  # "constant" (§3.5) or "cosine" (warm-up, cosine decay to 10 %)
+    lr_decay_steps: int = 10_000  # length of the cosine schedule (steps); constant lr afterwards
+    sampling: str = "windows"  # "windows": uniform over all windows; "content": each content label equally
+    mirror: bool = True  # the autoencoder also sees the mirrored clips (False: the original clips only)
+
+    def __post_init__(self):
+        for name, value, allowed in (("lr_schedule", self.lr_schedule, AE_LR_SCHEDULES),
+                                     ("sampling", self.sampling, AE_SAMPLINGS)):
+            if value not in allowed:
+                raise ValueError(f"train.autoencoder.{name} must be one of {allowed}, got {value!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class TransformerTrainConfig:
+    """Training of stage 2, the style transformer with the autoencoder frozen (§3.5, eq. 12)."""
+
+    learning_rate: float = 1e-4  # Adam learning rate (§3.5)
+    batch_size: int = 8  # content/style pairs per batch (§3.5)
+    window: int = 1280  # frames per content/style training clip (§3.5)
+    lambda_identity: float = 1.0  # weight of L_identity (eq. 12 fixes it to 1; settable for ablations)
+    lambda_cyclic: float = 1.0  # lambda_c of eq. 12
+    lambda_structure: float = 1.0  # lambda_s of eq. 12
+    lambda_appearance: float = 1.0  # lambda_a of eq. 12
+    use_identity: bool = True  # switch L_identity on/off (ablation, Table 4)
+    use_cyclic: bool = True  # switch L_cyclic on/off
+    use_structure: bool = True  # switch L_structure on/off
+    use_appearance: bool = True  # switch L_appearance on/off
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Training of both stages."""
+
+    autoencoder: AutoencoderTrainConfig = AutoencoderTrainConfig()
+    transformer: TransformerTrainConfig = TransformerTrainConfig()
+
+
+@dataclasses.dataclass(frozen=True)
+class InferenceConfig:
+    """Settings used only at transfer time (no effect on training or checkpoints)."""
+
+    method: str = "soft"  # default transfer method: the soft swap of eq. 4 (see tgst.model.METHODS)
+    bucket: float = 1.25  # length-bucket ratio of batched evaluation transfers (1 = exact shapes)
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"inference.method must be one of {METHODS}, got {self.method!r}")
+        if not self.bucket >= 1.0:
+            raise ValueError(f"inference.bucket must be >= 1, got {self.bucket}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    """A preset: the model, how to train it and how to run it."""
+
+    name: str = "paper"  # preset name, informational
+    model: ModelConfig = ModelConfig()
+    train: TrainConfig = TrainConfig()
+    inference: InferenceConfig = InferenceConfig()
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Config":
+        """Inverse of :meth:`to_dict` (JSON lists become tuples again); a flat config of a workdir written
+        before the split is mapped first (:func:`legacy_to_dict`). Absent fields take their defaults."""
+        if is_legacy(d):
+            d = legacy_to_dict(d)
+        return _build(cls, d)
+
+
+def _build(cls, m: Mapping[str, Any]):
+    kwargs = {}
+    hints = {f.name: f for f in dataclasses.fields(cls)}
+    for name, f in hints.items():
+        if name not in m:
+            continue
+        v = m[name]
+        default = f.default
+        if dataclasses.is_dataclass(default):
+            v = _build(type(default), v)
+        elif isinstance(v, list):
+            v = tuple(v)
+        kwargs[name] = v
+    return cls(**kwargs)
+
+
+def model_config_from_dict(d: Mapping[str, Any]) -> ModelConfig:
+    """A :class:`ModelConfig` from its :meth:`~ModelConfig.to_dict` (absent fields: defaults)."""
+    return _build(ModelConfig, d)
+
+
+def is_legacy(d: Mapping[str, Any]) -> bool:
+    """Whether ``d`` is the flat config of the versions before the model/train/inference split."""
+    return not isinstance(d.get("model"), Mapping)
+
+
+#: legacy flat field -> (section, stage or None, new field)
+_LEGACY_TRAIN = {
+    "ae_learning_rate": ("autoencoder", "learning_rate"), "ae_batch_size": ("autoencoder", "batch_size"),
+    "ae_window": ("autoencoder", "window"), "ae_lr_schedule": ("autoencoder", "lr_schedule"),
+    "ae_lr_decay_steps": ("autoencoder", "lr_decay_steps"), "ae_sampling": ("autoencoder", "sampling"),
+    "ae_mirror": ("autoencoder", "mirror"),
+    "transformer_learning_rate": ("transformer", "learning_rate"),
+    "transformer_batch_size": ("transformer", "batch_size"), "transformer_window": ("transformer", "window"),
+    **{f"{p}_{t}": ("transformer", f"{p}_{t}") for p in ("lambda", "use")
+       for t in ("identity", "cyclic", "structure", "appearance")},
+}
+
+
+def legacy_to_dict(flat: Mapping[str, Any]) -> dict:
+    """The flat config dict of older workdirs (one ``TGSTConfig``) in the layout of :meth:`Config.to_dict`.
+
+    A field the old dict lacks (it predates the field) is left out, so it takes its class default -- the
+    behaviour of the version that wrote it (e.g. ``edge_frames`` 0, ``swap_similarity`` "dot").
     """
-    if not stored:
-        return cfg
-    top = {f: getattr(TGSTConfig, f) for f in ADDED_FIELDS if f not in stored}
-    for name, cls, added in (("transformer", TransformerConfig, ADDED_TRANSFORMER_FIELDS),
-                             ("autoencoder", AutoencoderConfig, ADDED_AUTOENCODER_FIELDS)):
-        sub_stored = stored.get(name) or {}
-        sub = {f: getattr(cls, f) for f in added if f not in sub_stored}
-        if sub:
-            top[name] = dataclasses.replace(getattr(cfg, name), **sub)
-    return dataclasses.replace(cfg, **top) if top else cfg
+    model_fields = {f.name for f in dataclasses.fields(ModelConfig)}
+    out = {"model": {}, "train": {"autoencoder": {}, "transformer": {}}}
+    for k, v in flat.items():
+        if k == "name":
+            out["name"] = v
+        elif k in model_fields:
+            out["model"][k] = v
+        elif k in _LEGACY_TRAIN:
+            stage, field = _LEGACY_TRAIN[k]
+            out["train"][stage][field] = v
+    return out
 
 
-def get_config(name: str = "paper") -> TGSTConfig:
+def preset(name: str = "paper") -> Config:
     """Named preset: ``"paper"`` (published sizes and training setup), ``"fit"`` (the paper's sizes with an
     autoencoder recipe that fits real data) or ``"tiny"`` (fast tests/demo)."""
     if name == "paper":
-        return TGSTConfig(name="paper", edge_frames=16)
+        return Config(name="paper", model=ModelConfig(edge_frames=16))
     if name == "tiny":
-        return TGSTConfig(
+        return Config(
             name="tiny",
-            edge_frames=16,
-            ae_learning_rate=1e-3,
-            ae_batch_size=4,
-            ae_window=64,
-            transformer_learning_rate=1e-3,
-            transformer_batch_size=4,
-            transformer_window=128,
+            model=ModelConfig(edge_frames=16),
+            train=TrainConfig(
+                autoencoder=AutoencoderTrainConfig(learning_rate=1e-3, batch_size=4, window=64),
+                transformer=TransformerTrainConfig(learning_rate=1e-3, batch_size=4, window=128)),
         )
     if name == "fit":
-        return TGSTConfig(
+        return Config(
             name="fit",
-            edge_frames=16,
-            transformer=TransformerConfig(token_positions="none"),
-            autoencoder=AutoencoderConfig(standardize=True),
-            ae_learning_rate=1e-3,
-            ae_lr_schedule="cosine",
-            ae_lr_decay_steps=6000,
-            ae_sampling="content",
+            model=ModelConfig(edge_frames=16, transformer=TransformerConfig(token_positions="none"),
+                              autoencoder=AutoencoderConfig(standardize=True)),
+            train=TrainConfig(autoencoder=AutoencoderTrainConfig(
+                learning_rate=1e-3, lr_schedule="cosine", lr_decay_steps=6000, sampling="content")),
         )
     raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit' or 'tiny')")
+
+
+get_config = preset  # the earlier name
+config_from_dict = Config.from_dict  # the earlier name

@@ -1,7 +1,7 @@
 """TGST training data: dataset clips -> body exp-maps at the model rate, and deterministic batches.
 
 * :func:`prepare_clips` -- every clip of :func:`jaxgest.motion.datasets.load_folder` is resampled
-  explicitly to ``cfg.fps`` (Bandai-Namco is 30 fps, the synthetic data 60 fps, the paper's 60 fps),
+  explicitly to ``cfg.model.fps`` (Bandai-Namco is 30 fps, the synthetic data 60 fps, the paper's 60 fps),
   converted by :func:`jaxgest.motion.body.motion_to_body` (root yaw removed) to upper ``(F, 39)`` and
   lower ``(F, 24)`` float32 exp-maps, and mirrored once (:func:`jaxgest.motion.kinematics.mirror`) for the
   style augmentation.
@@ -31,7 +31,7 @@ import numpy as np
 from jaxgest.errors import DataError
 from jaxgest.motion import body, datasets, kinematics
 from jaxgest.motion.skeleton import Motion
-from jaxgest.tgst.config import TGSTConfig
+from jaxgest.tgst.config import Config
 
 AE_STAGE, TRANSFORMER_STAGE = 1, 2  # stream ids of the two stages' random batches
 #: what every TGST checkpoint was trained on (compared on restore)
@@ -69,8 +69,8 @@ def motion_to_arrays(motion: Motion, fps: float) -> tuple[np.ndarray, np.ndarray
     return bc.upper.astype(np.float32), bc.lower.astype(np.float32)
 
 
-def prepare_clips(clips: Sequence, cfg: TGSTConfig) -> BodyData:
-    """Dataset clips (``Clip`` or ``Motion``) -> :class:`BodyData` at ``cfg.fps`` with mirrored copies."""
+def prepare_clips(clips: Sequence, cfg: Config) -> BodyData:
+    """Dataset clips (``Clip`` or ``Motion``) -> :class:`BodyData` at ``cfg.model.fps`` with mirrored copies."""
     if not len(clips):
         raise DataError("TGST data: no clips")
     up, lo, mup, mlo, names, contents = [], [], [], [], [], []
@@ -78,10 +78,10 @@ def prepare_clips(clips: Sequence, cfg: TGSTConfig) -> BodyData:
         motion = c.motion if isinstance(c, datasets.Clip) else c
         name = str(c.path) if isinstance(c, datasets.Clip) else (motion.name or f"clip {i}")
         contents.append(c.content if isinstance(c, datasets.Clip) else name)
-        u, l = motion_to_arrays(motion, cfg.fps)
-        mu, ml = motion_to_arrays(kinematics.mirror(motion), cfg.fps)
+        u, l = motion_to_arrays(motion, cfg.model.fps)
+        mu, ml = motion_to_arrays(kinematics.mirror(motion), cfg.model.fps)
         up.append(u), lo.append(l), mup.append(mu), mlo.append(ml), names.append(name)
-    return BodyData(up, lo, mup, mlo, names, float(cfg.fps), contents)
+    return BodyData(up, lo, mup, mlo, names, float(cfg.model.fps), contents)
 
 
 def channel_stats(data: BodyData, min_std: float = 1e-2) -> dict:
@@ -98,7 +98,7 @@ def channel_stats(data: BodyData, min_std: float = 1e-2) -> dict:
     return out
 
 
-def load_body_data(data_dir, cfg: TGSTConfig, progress: bool = False) -> BodyData:
+def load_body_data(data_dir, cfg: Config, progress: bool = False) -> BodyData:
     """:func:`prepare_clips` of every clip in ``data_dir`` (any layout of ``load_folder``)."""
     return prepare_clips(datasets.load_folder(data_dir, progress=progress), cfg)
 
@@ -118,41 +118,45 @@ def _fit(window: int, lengths: np.ndarray, names: Sequence[str], multiple: int, 
     return int(min(window, fitted))
 
 
-def fit_windows(cfg: TGSTConfig, data: BodyData) -> TGSTConfig:
-    """``cfg`` with ``ae_window`` / ``transformer_window`` scaled to the data (see the module docstring).
+def fit_windows(cfg: Config, data: BodyData) -> Config:
+    """``cfg`` with both training windows (``cfg.train.*.window``) scaled to the data (module docstring).
 
     Windows stay multiples of 16 frames (the encoder's x4 reduction and the token stride) and never grow.
     """
-    lengths, m = data.lengths, cfg.frame_multiple
-    ae = _fit(cfg.ae_window, lengths, data.names, m, cfg.min_frames, 1, "autoencoder")
-    tr = _fit(cfg.transformer_window, lengths, data.names, m, cfg.min_frames, 2, "transformer")
-    return dataclasses.replace(cfg, ae_window=ae, transformer_window=tr)
+    lengths, m = data.lengths, cfg.model.frame_multiple
+    ae = _fit(cfg.train.autoencoder.window, lengths, data.names, m, cfg.model.min_frames, 1, "autoencoder")
+    tr = _fit(cfg.train.transformer.window, lengths, data.names, m, cfg.model.min_frames, 2, "transformer")
+    t = cfg.train
+    return dataclasses.replace(cfg, train=dataclasses.replace(
+        t, autoencoder=dataclasses.replace(t.autoencoder, window=ae),
+        transformer=dataclasses.replace(t.transformer, window=tr)))
 
 
 def _rng(seed: int, stage: int, step: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), int(stage), int(step)])
 
 
-def ae_batch(data: BodyData, cfg: TGSTConfig, seed: int, step: int) -> dict:
+def ae_batch(data: BodyData, cfg: Config, seed: int, step: int) -> dict:
     """``{"upper": (B, W, 39), "lower": (B, W, 24)}`` float32 windows of original and mirrored clips.
 
-    ``cfg.ae_mirror=False`` leaves the mirrored clips out. ``cfg.ae_sampling == "windows"``: uniform over all
-    valid (clip, start) pairs of both sets;
+    ``cfg.train.autoencoder.mirror=False`` leaves the mirrored clips out. ``cfg.train.autoencoder.sampling``
+    ``"windows"``: uniform over all valid (clip, start) pairs of both sets;
     ``"content"``: every content label gets the same share of the windows (uniform over the valid windows of
     its clips), so a few long or numerous contents (Bandai-Namco: 105 of 144 training clips are locomotion)
-    do not drown the others. B = ``cfg.ae_batch_size``, W = ``cfg.ae_window``.
+    do not drown the others. B = ``cfg.train.autoencoder.batch_size``, W = ``cfg.train.autoencoder.window``.
     """
     rng = _rng(seed, AE_STAGE, step)
-    copies = 2 if cfg.ae_mirror else 1  # ae_mirror=False: the original clips only
+    copies = 2 if cfg.train.autoencoder.mirror else 1  # ae_mirror=False: the original clips only
     uppers = (data.upper + data.mirrored_upper)[:copies * len(data.upper)]
     lowers = (data.lower + data.mirrored_lower)[:copies * len(data.lower)]
     groups = None
-    if cfg.ae_sampling == "content":
+    if cfg.train.autoencoder.sampling == "content":
         groups = list(data.contents or data.names) * copies
-    w = sample_windows_idx(np.concatenate([data.lengths] * copies), cfg.ae_window, cfg.ae_batch_size, rng,
+    t = cfg.train.autoencoder
+    w = sample_windows_idx(np.concatenate([data.lengths] * copies), t.window, t.batch_size, rng,
                            list(data.names) * copies, groups=groups)
-    up = np.stack([uppers[i][s:s + cfg.ae_window] for i, s in w])
-    lo = np.stack([lowers[i][s:s + cfg.ae_window] for i, s in w])
+    up = np.stack([uppers[i][s:s + cfg.train.autoencoder.window] for i, s in w])
+    lo = np.stack([lowers[i][s:s + cfg.train.autoencoder.window] for i, s in w])
     return {"upper": up, "lower": lo}
 
 
@@ -180,17 +184,17 @@ def sample_windows_idx(lengths: np.ndarray, length: int, batch: int, rng: np.ran
     return [(int(i), int(rng.integers(0, valid[i]))) for i in index]
 
 
-def transformer_batch(data: BodyData, cfg: TGSTConfig, seed: int, step: int,
+def transformer_batch(data: BodyData, cfg: Config, seed: int, step: int,
                       mirror_prob: float = 0.5) -> dict:
     """``{"content": (B, W, 39), "style": (B, W, 39)}`` of unaligned pairs of different clips.
 
-    Content and style clips are drawn uniformly among clips of at least W = ``cfg.transformer_window``
+    Content and style clips are drawn uniformly among clips of at least W = ``cfg.train.transformer.window``
     frames (two different clips per pair), each window starts uniformly at random, and the style window is
     taken from the mirrored clip with probability ``mirror_prob`` (style augmentation, §4.1).
     References: Kuriyama et al. 2022, §3.5 ("no behavioral synchronization or time alignment").
     """
     rng = _rng(seed, TRANSFORMER_STAGE, step)
-    w, b = cfg.transformer_window, cfg.transformer_batch_size
+    w, b = cfg.train.transformer.window, cfg.train.transformer.batch_size
     usable = np.flatnonzero(data.lengths >= w)
     if len(usable) < 2:
         hi = int(np.argmax(data.lengths))
@@ -207,13 +211,13 @@ def transformer_batch(data: BodyData, cfg: TGSTConfig, seed: int, step: int,
     return {"content": np.stack(content), "style": np.stack(style)}
 
 
-def describe(data: BodyData, cfg: Optional[TGSTConfig] = None) -> dict:
+def describe(data: BodyData, cfg: Optional[Config] = None) -> dict:
     """JSON-friendly summary: clip count, frames, lengths and (with ``cfg``) the windows used."""
     lengths = data.lengths
     out = {"clips": len(lengths), "frames": int(lengths.sum()), "fps": data.fps,
            "shortest": int(lengths.min()), "longest": int(lengths.max()), "median": float(np.median(lengths))}
     if cfg is not None:
-        out.update(ae_window=cfg.ae_window, transformer_window=cfg.transformer_window,
-                   ae_window_clips=int((lengths >= cfg.ae_window).sum()),
-                   transformer_window_clips=int((lengths >= cfg.transformer_window).sum()))
+        out.update(ae_window=cfg.train.autoencoder.window, transformer_window=cfg.train.transformer.window,
+                   ae_window_clips=int((lengths >= cfg.train.autoencoder.window).sum()),
+                   transformer_window_clips=int((lengths >= cfg.train.transformer.window).sum()))
     return out

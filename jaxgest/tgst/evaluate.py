@@ -14,7 +14,9 @@
 * :func:`swap_diagnostics` -- how the soft swap blends: mean max weight, effective number of blended style
   tokens, fraction of argmax within +-1 token of the query's own index and its chance level.
 
-The protocols and per-clip errors live in :mod:`jaxgest.tgst.protocol` (re-exported here).
+The protocols and per-clip errors live in :mod:`jaxgest.tgst.protocol`, the batched transfers and swap
+diagnostics in :mod:`jaxgest.tgst.batched`, the report tables in :mod:`jaxgest.tgst.tables` (all re-exported
+here).
 
 Units: BVH positions of both datasets and of the synthetic data are centimetres; hands are compared in
 metres and velocities in metres per second, at the result's frame rate (a clip at another rate is
@@ -24,8 +26,6 @@ resampled to it).
 from __future__ import annotations
 
 import dataclasses
-import functools
-import math
 import time
 from collections.abc import Sequence
 
@@ -34,8 +34,12 @@ import numpy as np
 from jaxgest import metrics
 from jaxgest.errors import DataError
 from jaxgest.tgst import model as tgst_model
+from jaxgest.tgst.batched import (DEFAULT_BUCKET, BatchedTransfer, bucket_length,  # noqa: F401  (re-exported)
+                                  swap_diagnostics)
 from jaxgest.tgst.protocol import (CM_TO_M, PROTOCOLS, Protocol, _joint_indices, _notes, clip_errors,  # noqa: F401
                                    clip_features, features_errors, get_protocol, style_reference)
+from jaxgest.tgst.tables import (ERROR_KEYS, STATS, diagnostics_table, markdown_table,  # noqa: F401
+                                 validity_table)
 
 #: every ``method=`` the model accepts
 METHODS = tgst_model.METHODS
@@ -43,10 +47,7 @@ METHODS = tgst_model.METHODS
 TRANSFER_METHODS = getattr(tgst_model, "TRANSFER_METHODS", tuple(m for m in METHODS if m != "autoencoder"))
 PAIR_MODES = ("intra", "inter", "all")
 NEUTRAL = ("normal", "neutral")
-STATS = ("mean", "worst", "w25")
-ERROR_KEYS = ("content", "style", "gt_content", "gt_style")
 CONTROLS = ("content_as_is", "style_as_is")
-DEFAULT_BUCKET = 1.25
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -116,145 +117,6 @@ def make_pairs(
             gt = others[0] if others else (candidates[0] if candidates else None)
             pairs.append(Pair(c, s, gt))
     return _subset(pairs, max_pairs, seed)
-
-
-# --------------------------------------------------------------------------------------------------------
-# Batched, bucketed transfers
-
-
-def bucket_length(frames: int, ratio: float = DEFAULT_BUCKET, *, multiple: int = 16, base: int = 64) -> int:
-    """Padded length of a ``frames``-frame clip: the smallest of base, base * ratio, base * ratio^2, ...
-    (each rounded up to a multiple of ``multiple``) that holds it. ``ratio <= 1``: no bucketing (the
-    clip's own length). Few distinct lengths -> few compilations; at most ``ratio``x the frames.
-    """
-    if ratio <= 1.0:
-        return int(frames)
-    k = base
-    while k < frames:
-        k = max(k + multiple, int(math.ceil(k * ratio / multiple)) * multiple)
-    return k
-
-
-def _num_tokens(frames: int, cfg) -> int:
-    """Tokens whose frames all lie in the first ``frames`` frames (token m covers latent frames
-    m*h .. m*h + w - 1)."""
-    red, w, h = cfg.autoencoder.time_reduction, cfg.token_width, cfg.token_stride
-    latent = frames // red
-    return 0 if latent < w else (latent - w) // h + 1
-
-
-def _swap_weights(params, content_upper, style_upper, *, cfg):
-    """Soft-swap weights ``(batch, Nc, Ns)`` of a transfer, row n = content token n from the content's first
-    frame, column m = style token m from the style's first frame (the one call site of the model's API)."""
-    fn = getattr(tgst_model, "swap_weights", None)
-    if fn is not None:
-        return fn(params, content_upper, style_upper, cfg=cfg)
-    return tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method="soft")[2]["swap_weights"]
-
-
-@functools.lru_cache(maxsize=16)
-def _pair_function(cfg, methods: tuple, weights: bool):
-    """One jitted function per (config, methods): every method's transfer of one (padded) pair, plus the
-    soft-swap weights; jax.jit compiles it once per (content, style) bucket shape."""
-    import jax
-
-    def run(params, content_upper, style_upper):
-        outs = {}
-        for m in methods:
-            up, lo, _ = tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method=m)
-            outs[m] = (up, lo)
-        w = _swap_weights(params, content_upper, style_upper, cfg=cfg) if weights else None
-        return outs, w
-
-    return jax.jit(run)
-
-
-class BatchedTransfer:
-    """Transfers of many pairs with a trained :class:`jaxgest.tgst.api.TGSTModel` and few compilations.
-
-    Each clip is converted to body exp-maps at the model rate once; content and style are padded at the end
-    to :func:`bucket_length` (``ratio``; <= 1 = exact, no padding), every method runs in one jitted call per
-    pair, and the outputs are cut back to the content's frames and written on its skeleton
-    (:meth:`TGSTModel.to_motion`). Pairs that share a bucket shape share one compilation.
-
-    Padding (``pad_mode``, any ``numpy.pad`` mode): "wrap" (default) continues each clip with its own first
-    frames, so the extra style tokens are copies of real style tokens and both clips' per-channel statistics
-    (AdaIN, Avatar-net whitening) stay close to the real ones; "edge" (held last pose) shrinks the content's
-    std and biased AdaIN's mean style error by -0.013 m/s (3 standard errors) against exact shapes on
-    Bandai-Namco, while "wrap" stays within 1.5 standard errors of exact for every method (README). The
-    padding reaches the real frames only through the transformer's attention (band and CLS), the swap and
-    the baselines' statistics; the padded output frames are cut off.
-    """
-
-    def __init__(self, model, methods: Sequence[str], *, ratio: float = DEFAULT_BUCKET, diagnostics: bool = True,
-                 pad_mode: str = "wrap"):
-        self.model, self.methods, self.ratio, self.pad_mode = model, tuple(methods), float(ratio), pad_mode
-        self.diagnostics = diagnostics and any(m in ("soft", "hard") for m in self.methods)
-        self._arrays: dict = {}
-        self.shapes: set = set()
-
-    def body(self, clip, role: str) -> np.ndarray:
-        key = id(clip)
-        if key not in self._arrays:
-            self._arrays[key] = (clip, self.model.body_arrays(clip.motion, role))
-        return self._arrays[key][1]
-
-    def run(self, pair: Pair) -> tuple[dict, dict | None]:
-        """``({method: Motion}, swap diagnostics or None)`` of one pair; DataError for unusable clips."""
-        cu, su = self.body(pair.content, "content"), self.body(pair.style, "style")
-        fc, fs = len(cu), len(su)
-        bc, bs = bucket_length(fc, self.ratio), bucket_length(fs, self.ratio)
-        self.shapes.add((bc, bs))
-        c = np.pad(cu, ((0, bc - fc), (0, 0)), mode=self.pad_mode)[None]
-        s = np.pad(su, ((0, bs - fs), (0, 0)), mode=self.pad_mode)[None]
-        fn = _pair_function(self.model.cfg, self.methods, self.diagnostics)
-        outs, w = fn(self.model.params, c, s)
-        results = {}
-        for m, (up, lo) in outs.items():
-            results[m] = self.model.to_motion(np.asarray(up[0, :fc]), np.asarray(lo[0, :fc]),
-                                              pair.content.motion)
-        diag = None
-        if w is not None:
-            nc, ns = _num_tokens(fc, self.model.cfg), _num_tokens(fs, self.model.cfg)
-            diag = swap_diagnostics(np.asarray(w[0]), nc, ns) if nc and ns else None
-        return results, diag
-
-
-def swap_diagnostics(weights: np.ndarray, num_queries: int | None = None, num_style: int | None = None) -> dict:
-    """How a soft swap blends: statistics of swap weights ``(Nc, Ns)`` (rows on the simplex).
-
-    Rows are content tokens from the content's first frame, columns style tokens from the style's first
-    frame (same model rate, so equal indices are equal times). Only the first ``num_queries`` rows (tokens of
-    the real content) are used; columns past ``num_style`` (padding of the style) stay in the rows as the
-    swap saw them and their total weight is reported as ``padding_mass``. Returns::
-
-        {"max_weight": mean over rows of max_m w_nm,
-         "effective_tokens": mean over rows of 1 / sum_m w_nm^2 (1 = one token, Ns = uniform),
-         "argmax_within_1": fraction of rows whose argmax m has |m - n| <= 1,
-         "chance_within_1": that fraction for an argmax uniform over the Ns real style tokens,
-         "padding_mass", "num_queries", "num_style"}
-
-    References: Kuriyama et al. 2022, eq. 4 (the soft swap weights W).
-    """
-    w = np.asarray(weights, np.float64)
-    if w.ndim != 2 or w.size == 0:
-        raise DataError(f"swap_diagnostics: expected weights (Nc, Ns), got shape {w.shape}")
-    nq = w.shape[0] if num_queries is None else min(int(num_queries), w.shape[0])
-    ns = w.shape[1] if num_style is None else min(int(num_style), w.shape[1])
-    w = w[:nq]
-    n = np.arange(nq)
-    am = w.argmax(axis=1)
-    lo, hi = np.maximum(n - 1, 0), np.minimum(n + 1, ns - 1)
-    chance = np.maximum(hi - lo + 1, 0) / ns
-    return {
-        "max_weight": float(w.max(axis=1).mean()),
-        "effective_tokens": float((1.0 / np.sum(w**2, axis=1)).mean()),
-        "argmax_within_1": float(np.mean(np.abs(am - n) <= 1)),
-        "chance_within_1": float(chance.mean()),
-        "padding_mass": float(w[:, ns:].sum(axis=1).mean()),
-        "num_queries": int(nq),
-        "num_style": int(ns),
-    }
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -440,17 +302,21 @@ def evaluate(
         c_feats, s_ref = cache(pair.content, fps), cache(pair.style, fps, True)
         gt, gt_ref = _gt_features(pair, cache, fps, window)
         # controls: the content clip and the style clip (its plain features) taken as the result
-        for name, feats in (("content_as_is", c_feats), ("style_as_is", None)):
+        def score(section: str, name: str, result_feats) -> None:
+            """Errors of one result (features, or a callable giving them) into ``record`` and the totals."""
             try:
-                feats = feats if feats is not None else cache(pair.style, fps)
+                feats = result_feats() if callable(result_feats) else result_feats
                 errs = features_errors(feats, c_feats, s_ref, gt, window=window, gt_reference_feats=gt_ref)
             except DataError as e:
                 skipped[name] += 1
-                record["controls"][name] = {"skipped": str(e)}
-                continue
-            record["controls"][name] = errs
+                record[section][name] = {"skipped": str(e)}
+                return
+            record[section][name] = errs
             for k, v in errs.items():
                 collected[name][k].append(v)
+
+        score("controls", "content_as_is", c_feats)
+        score("controls", "style_as_is", lambda: cache(pair.style, fps))
         results, failure = {}, None
         try:
             if batched is not None:
@@ -461,21 +327,15 @@ def evaluate(
         except DataError as e:
             failure = str(e)
         for method in methods:
-            try:
+            def transferred(method=method):
                 if failure is not None:
                     raise DataError(failure)
                 result = results.get(method)
                 if result is None:
                     result = model.transfer(pair.content.motion, pair.style.motion, method=method)
-                errs = features_errors(clip_features(result, fps, proto), c_feats, s_ref, gt, window=window,
-                                       gt_reference_feats=gt_ref)
-            except DataError as e:
-                skipped[method] += 1
-                record["errors"][method] = {"skipped": str(e)}
-                continue
-            record["errors"][method] = errs
-            for k, v in errs.items():
-                collected[method][k].append(v)
+                return clip_features(result, fps, proto)
+
+            score("errors", method, transferred)
     label = proto.label
     summary = {m: dict(_summarize(collected[m], skipped[m]), protocol=label) for m in methods}
     controls = {m: dict(_summarize(collected[m], skipped[m]), protocol=label) for m in CONTROLS}
@@ -559,68 +419,6 @@ def metric_validity(
         "protocol": proto.label,
         "rows": {r: {k: _average(v) for k, v in cols.items()} for r, cols in rows.items()},
     }
-
-
-# --------------------------------------------------------------------------------------------------------
-# Report tables
-
-_LABELS = {
-    "soft": "Soft swap (ours)",
-    "hard": "Hard swap (19)",
-    "adain": "AdaIN (17)",
-    "avatarnet": "Avatar-net (18)",
-    "autoencoder": "Autoencoder round trip",
-    "content_as_is": "Content as is (control)",
-    "style_as_is": "Style as is (control)",
-}
-
-
-def _fmt(stats: dict | None) -> list[str]:
-    return ["-"] * 3 if stats is None else [f"{stats[k]:.3g}" for k in STATS]
-
-
-def markdown_table(report: dict) -> str:
-    """The paper's Table 2/3 layout (+ ground-truth columns, + control rows) as markdown, one row per method,
-    with the protocol of every row."""
-    head = [
-        "Method",
-        "protocol",
-        "n",
-        *(f"content {k}" for k in STATS),
-        *(f"style {k}" for k in STATS),
-        *(f"gt content {k}" for k in STATS),
-        *(f"gt style {k}" for k in STATS),
-    ]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    rows = list(report["methods"].items()) + list((report.get("controls") or {}).items())
-    for m, s in rows:
-        proto = s.get("protocol", report.get("protocol", {}).get("name", "-"))
-        cells = [_LABELS.get(m, m), proto, str(s.get("num_evaluated", "-"))]
-        cells += [c for k in ERROR_KEYS for c in _fmt(s[k])]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
-def diagnostics_table(report: dict) -> str:
-    """Swap diagnostics of a report as one markdown row ('' when the report has none)."""
-    d = report.get("swap_diagnostics")
-    if not d:
-        return ""
-    head = ["soft swap", "pairs", "mean max weight", "effective tokens", "argmax within +-1", "chance",
-            "padding mass"]
-    cells = ["weights (eq. 4)", str(d["num_pairs"]), f"{d['max_weight']:.3g}", f"{d['effective_tokens']:.3g}",
-             f"{d['argmax_within_1']:.3g}", f"{d['chance_within_1']:.3g}", f"{d['padding_mass']:.3g}"]
-    return "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head), "| " + " | ".join(cells) + " |"])
-
-
-def validity_table(table: dict) -> str:
-    """The paper's Table 1 layout as markdown: rows content / style sample, content and style errors."""
-    head = ["Samples", "protocol", *(f"content {k}" for k in STATS), *(f"style {k}" for k in STATS)]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for row, cols in table["rows"].items():
-        cells = [row.capitalize(), table.get("protocol", "-")] + [c for k in ("content", "style") for c in _fmt(cols[k])]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
 
 
 __all__ = [

@@ -1,6 +1,9 @@
-"""Losses of the style transformer (eqs. 5-12). Pure functions returning per-example values ``(batch,)``.
+"""Losses of both TGST stages. Pure functions returning per-example values ``(batch,)``.
 
-The autoencoder's reconstruction loss lives with the autoencoder (``autoencoder.expmap_reconstruction_loss``).
+* the style transformer's terms, eqs. 5-12 (:func:`identity_loss` ... :func:`total_transformer_loss`), and
+  their evaluation on a batch of tokens (:func:`transformer_loss_terms`);
+* the autoencoder's per-batch terms (:func:`ae_loss_terms`); its reconstruction loss itself lives with the
+  autoencoder (``autoencoder.expmap_reconstruction_loss``).
 
 References: Kuriyama et al. 2022, §3.5, eqs. 5-12 (and the authors' public code for the reductions).
 """
@@ -11,14 +14,14 @@ import chex
 import jax
 import jax.numpy as jnp
 
+from jaxgest.nn import safe_norm
+from jaxgest.tgst import model as M
+from jaxgest.tgst.autoencoder import expmap_reconstruction_loss, mean_angular_error_deg
+from jaxgest.tgst.config import ModelConfig, TransformerTrainConfig
+
+Params = M.Params
+
 _EPS = 1e-8
-
-
-def _safe_norm(x: jax.Array, axis=-1) -> jax.Array:
-    """L2 norm with a zero (not NaN) gradient at 0."""
-    sq = jnp.sum(x * x, axis=axis)
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
 def token_norm(x: jax.Array) -> jax.Array:
@@ -27,7 +30,7 @@ def token_norm(x: jax.Array) -> jax.Array:
     References: Kuriyama et al. 2022, §3.5 ("averaged L2-norm computed per each token").
     """
     chex.assert_rank(x, 3)
-    return jnp.mean(_safe_norm(x), axis=1)
+    return jnp.mean(safe_norm(x), axis=1)
 
 
 def identity_loss(content_identity: jax.Array, content_tokens: jax.Array, style_identity: jax.Array,
@@ -59,7 +62,7 @@ def structure_matrix(keys: jax.Array) -> jax.Array:
     References: Kuriyama et al. 2022, eq. 9.
     """
     chex.assert_rank(keys, 3)
-    unit = keys / jnp.maximum(_safe_norm(keys)[..., None], _EPS)
+    unit = keys / jnp.maximum(safe_norm(keys)[..., None], _EPS)
     return jnp.einsum("bid,bjd->bij", unit, unit)
 
 
@@ -70,7 +73,7 @@ def structure_loss(content_keys: jax.Array, transferred_keys: jax.Array) -> jax.
     """
     chex.assert_equal_shape([content_keys, transferred_keys])
     diff = structure_matrix(content_keys) - structure_matrix(transferred_keys)
-    return _safe_norm(diff.reshape(diff.shape[0], -1))
+    return safe_norm(diff.reshape(diff.shape[0], -1))
 
 
 def appearance_loss(style_cls: jax.Array, transferred_cls: jax.Array) -> jax.Array:
@@ -80,7 +83,7 @@ def appearance_loss(style_cls: jax.Array, transferred_cls: jax.Array) -> jax.Arr
     """
     chex.assert_equal_shape([style_cls, transferred_cls])
     chex.assert_rank(style_cls, 2)
-    return _safe_norm(style_cls - transferred_cls)
+    return safe_norm(style_cls - transferred_cls)
 
 
 def total_transformer_loss(identity: jax.Array, cyclic: jax.Array, structure: jax.Array,
@@ -104,3 +107,65 @@ def total_transformer_loss(identity: jax.Array, cyclic: jax.Array, structure: ja
     for t in active[1:]:
         total = total + t
     return total
+
+
+def transformer_loss_terms(tr_params: Params, content_tokens: jax.Array, style_tokens: jax.Array, *,
+                           cfg: ModelConfig, train: TransformerTrainConfig) -> dict[str, jax.Array]:
+    """Per-example loss terms ``(batch,)`` of eqs. 5-11 and their weighted sum (eq. 12) under ``"loss"``.
+
+    content_tokens, style_tokens: raw tokens ``(batch, N, d)``. ``train`` gives the weights and switches of
+    eq. 12; switched-off terms are not computed and reported as zeros.
+    References: Kuriyama et al. 2022, eqs. 5-12.
+    """
+    enc_c, aux_c = M.transformer_encode(tr_params, content_tokens, cfg=cfg)
+    enc_s, aux_s = M.transformer_encode(tr_params, style_tokens, cfg=cfg)
+    transferred, _ = M.swap_encoded(tr_params, enc_c, enc_s, style_tokens, cfg=cfg)  # g^{s|c}, eq. 4
+    zeros = jnp.zeros(content_tokens.shape[:1], content_tokens.dtype)
+    terms = {"identity": zeros, "cyclic": zeros, "structure": zeros, "appearance": zeros}
+    if train.use_identity:  # eq. 5: each clip transferred with itself as style
+        c_id, _ = M.swap_encoded(tr_params, enc_c, enc_c, content_tokens, cfg=cfg)
+        s_id, _ = M.swap_encoded(tr_params, enc_s, enc_s, style_tokens, cfg=cfg)
+        terms["identity"] = identity_loss(c_id, content_tokens, s_id, style_tokens)
+    if train.use_cyclic or train.use_structure or train.use_appearance:
+        enc_x, aux_x = M.transformer_encode(tr_params, transferred, cfg=cfg)
+        if train.use_cyclic:  # eqs. 6-8: back-transfer with the content as style
+            cyc, _ = M.swap_encoded(tr_params, enc_x, enc_c, content_tokens, cfg=cfg)
+            terms["cyclic"] = cyclic_loss(cyc, content_tokens)
+        if train.use_structure:  # eqs. 9-10
+            terms["structure"] = structure_loss(aux_c["keys"], aux_x["keys"])
+        if train.use_appearance:  # eq. 11
+            terms["appearance"] = appearance_loss(aux_s["cls"], aux_x["cls"])
+    terms["loss"] = total_transformer_loss(
+        terms["identity"], terms["cyclic"], terms["structure"], terms["appearance"],
+        lambda_identity=train.lambda_identity, lambda_cyclic=train.lambda_cyclic,
+        lambda_structure=train.lambda_structure, lambda_appearance=train.lambda_appearance,
+        use_identity=train.use_identity, use_cyclic=train.use_cyclic, use_structure=train.use_structure,
+        use_appearance=train.use_appearance)
+    return terms
+
+
+def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: ModelConfig) -> dict[str, jax.Array]:
+    """Per-example autoencoder losses ``(batch,)``: ``loss`` over all 21 joints, upper/lower parts, degrees.
+
+    batch: ``{"upper": (B, F, 39), "lower": (B, F, 24)}`` with F a multiple of 4 (the encoder's stride).
+    Each window goes through the same clip-end handling as a whole clip at transfer time
+    (:func:`jaxgest.tgst.model.reconstruct`: replicate-padded at both ends, trimmed back); without edge
+    frames (``cfg.edge_frames == 0``, old runs) the window is encoded as it is.
+    """
+    upper, lower = batch["upper"], batch["lower"]
+    chex.assert_rank([upper, lower], 3)
+    b, f, _ = upper.shape
+    chex.assert_shape(lower, (b, f, cfg.autoencoder.lower_channels))
+    if cfg.edge_frames:
+        up_hat, lo_hat = M.reconstruct(ae_params, upper, cfg=cfg)
+    else:
+        (up_hat, lo_hat), _ = M.autoencoder_module(cfg).apply({"params": ae_params}, upper)
+        up_hat, lo_hat = up_hat[:, :f], lo_hat[:, :f]
+    pred = jnp.concatenate([up_hat, lo_hat], axis=-1)
+    target = jnp.concatenate([upper, lower], axis=-1)
+    return {
+        "loss": expmap_reconstruction_loss(pred, target),
+        "upper_loss": expmap_reconstruction_loss(up_hat, upper),
+        "lower_loss": expmap_reconstruction_loss(lo_hat, lower),
+        "angle_deg": jax.lax.stop_gradient(mean_angular_error_deg(pred, target)),
+    }

@@ -1,9 +1,11 @@
-"""TGST as pure functions of parameter pytrees: init, encode/decode, token transfer, training loss terms.
+"""TGST as pure functions of parameter pytrees: modules, init, encode/decode, token transfer.
 
 ``params = {"autoencoder": <MotionAutoencoder params>, "transformer": <StyleTransformer params>}`` (plain
-Flax ``params`` collections). Every function takes ``cfg`` (a hashable :class:`TGSTConfig`) as a keyword
-so it can be a jit static argument: ``jax.jit(transfer_arrays, static_argnames=("cfg", "method"))``.
+Flax ``params`` collections). Every function takes ``cfg`` (a hashable
+:class:`~jaxgest.tgst.config.ModelConfig`) as a keyword so it can be a jit static argument:
+``jax.jit(transfer_arrays, static_argnames=("cfg", "method"))``.
 
+The training losses built from these functions are in :mod:`jaxgest.tgst.losses`.
 References: Kuriyama et al. 2022, §3 (Fig. 2 data flow), §4.3 (baselines).
 """
 
@@ -16,9 +18,9 @@ import chex
 import jax
 import jax.numpy as jnp
 
-from jaxgest.tgst import baselines, losses, swap
+from jaxgest.tgst import baselines, swap
 from jaxgest.tgst.autoencoder import MotionAutoencoder
-from jaxgest.tgst.config import TGSTConfig
+from jaxgest.tgst.config import ModelConfig
 from jaxgest.tgst.tokens import check_clip_length, detokenize, num_tokens, padded_length, tokenize
 from jaxgest.tgst.transformer import StyleTransformer
 
@@ -30,15 +32,15 @@ METHODS = TRANSFER_METHODS + ("autoencoder",)
 Params = dict[str, Any]
 
 
-def autoencoder_module(cfg: TGSTConfig) -> MotionAutoencoder:
+def autoencoder_module(cfg: ModelConfig) -> MotionAutoencoder:
     return MotionAutoencoder(cfg.autoencoder)
 
 
-def transformer_module(cfg: TGSTConfig) -> StyleTransformer:
+def transformer_module(cfg: ModelConfig) -> StyleTransformer:
     return StyleTransformer(cfg.transformer)
 
 
-def init_params(cfg: TGSTConfig, key: jax.Array) -> Params:
+def init_params(cfg: ModelConfig, key: jax.Array) -> Params:
     """Fresh parameters ``{"autoencoder": ..., "transformer": ...}`` for ``cfg``."""
     k_ae, k_tr = jax.random.split(key)
     frames = cfg.frame_multiple
@@ -48,12 +50,12 @@ def init_params(cfg: TGSTConfig, key: jax.Array) -> Params:
     return {"autoencoder": ae["params"], "transformer": tr["params"]}
 
 
-def encode(ae_params: Params, upper: jax.Array, *, cfg: TGSTConfig) -> jax.Array:
+def encode(ae_params: Params, upper: jax.Array, *, cfg: ModelConfig) -> jax.Array:
     """Upper-body exp-maps ``(batch, F, 39)`` -> latents ``(batch, ceil(F / 4), 16)``."""
     return autoencoder_module(cfg).apply({"params": ae_params}, upper, method=MotionAutoencoder.encode)
 
 
-def decode(ae_params: Params, z: jax.Array, *, cfg: TGSTConfig) -> tuple[jax.Array, jax.Array]:
+def decode(ae_params: Params, z: jax.Array, *, cfg: ModelConfig) -> tuple[jax.Array, jax.Array]:
     """Latents ``(batch, T, 16)`` -> (upper ``(batch, 4T, 39)``, lower ``(batch, 4T, 24)``)."""
     m = autoencoder_module(cfg)
     upper = m.apply({"params": ae_params}, z, method=MotionAutoencoder.decode_upper)
@@ -61,7 +63,7 @@ def decode(ae_params: Params, z: jax.Array, *, cfg: TGSTConfig) -> tuple[jax.Arr
     return upper, lower
 
 
-def edge_layout(frames: int, *, cfg: TGSTConfig) -> tuple[int, int]:
+def edge_layout(frames: int, *, cfg: ModelConfig) -> tuple[int, int]:
     """(lead, total) frames of a clip of ``frames`` frames after :func:`pad_clip`.
 
     lead = ``cfg.edge_frames`` replicated first frames; the end is replicated by at least as many frames and
@@ -71,7 +73,7 @@ def edge_layout(frames: int, *, cfg: TGSTConfig) -> tuple[int, int]:
     return lead, padded_length(frames + 2 * lead, cfg.frame_multiple)
 
 
-def pad_clip(x: jax.Array, *, cfg: TGSTConfig) -> jax.Array:
+def pad_clip(x: jax.Array, *, cfg: ModelConfig) -> jax.Array:
     """Clip ends (SPEC §3): replicate-pad ``(batch, F, ch)`` at both ends (see :func:`edge_layout`).
 
     The one place where every encode path (autoencoder training windows, transformer training, transfers,
@@ -88,19 +90,19 @@ def pad_clip(x: jax.Array, *, cfg: TGSTConfig) -> jax.Array:
     return jnp.pad(x, ((0, 0), (lead, total - f - lead), (0, 0)), mode="edge")
 
 
-def trim_clip(y: jax.Array, frames: int, *, cfg: TGSTConfig) -> jax.Array:
+def trim_clip(y: jax.Array, frames: int, *, cfg: ModelConfig) -> jax.Array:
     """Inverse of :func:`pad_clip` on decoded frames: the ``frames`` frames after the lead."""
     return y[:, cfg.edge_frames:cfg.edge_frames + frames]
 
 
-def clip_latent_range(frames: int, *, cfg: TGSTConfig) -> tuple[int, int]:
+def clip_latent_range(frames: int, *, cfg: ModelConfig) -> tuple[int, int]:
     """[start, stop) of the latent frames of :func:`encode_clip` that belong to the real clip."""
     red = cfg.autoencoder.time_reduction
     start = cfg.edge_frames // red
     return start, start + math.ceil(frames / red)
 
 
-def encode_clip(ae_params: Params, upper: jax.Array, *, cfg: TGSTConfig) -> jax.Array:
+def encode_clip(ae_params: Params, upper: jax.Array, *, cfg: ModelConfig) -> jax.Array:
     """Upper-body exp-maps ``(batch, F, 39)`` -> latents of the padded clip (:func:`pad_clip`).
 
     Decode them with :func:`decode` and cut the result with :func:`trim_clip`; the latents of the real
@@ -109,27 +111,27 @@ def encode_clip(ae_params: Params, upper: jax.Array, *, cfg: TGSTConfig) -> jax.
     return encode(ae_params, pad_clip(upper, cfg=cfg), cfg=cfg)
 
 
-def reconstruct(ae_params: Params, upper: jax.Array, *, cfg: TGSTConfig) -> tuple[jax.Array, jax.Array]:
+def reconstruct(ae_params: Params, upper: jax.Array, *, cfg: ModelConfig) -> tuple[jax.Array, jax.Array]:
     """The autoencoder round trip ``(batch, F, 39)`` -> (upper ``(batch, F, 39)``, lower ``(batch, F, 24)``)."""
     f = upper.shape[1]
     up, lo = decode(ae_params, encode_clip(ae_params, upper, cfg=cfg), cfg=cfg)
     return trim_clip(up, f, cfg=cfg), trim_clip(lo, f, cfg=cfg)
 
 
-def transformer_encode(tr_params: Params, tokens: jax.Array, *, cfg: TGSTConfig):
+def transformer_encode(tr_params: Params, tokens: jax.Array, *, cfg: ModelConfig):
     """T_E: tokens ``(batch, N, d)`` -> (encoded ``(batch, 1 + N, d)``, aux with keys / cls)."""
     return transformer_module(cfg).apply({"params": tr_params}, tokens, method=StyleTransformer.encode)
 
 
 def transformer_decode(tr_params: Params, encoded_content: jax.Array, encoded_style: jax.Array, *,
-                       cfg: TGSTConfig):
+                       cfg: ModelConfig):
     """T_D: (encoded content, encoded style) -> (decoded content ``(batch, Nc, d)``, aux), eq. 3."""
     return transformer_module(cfg).apply({"params": tr_params}, encoded_content, encoded_style,
                                          method=StyleTransformer.decode)
 
 
 def swap_encoded(tr_params: Params, encoded_content: jax.Array, encoded_style: jax.Array,
-                 style_tokens: jax.Array, *, cfg: TGSTConfig, hard: bool = False):
+                 style_tokens: jax.Array, *, cfg: ModelConfig, hard: bool = False):
     """Decode and swap: eq. 3 then eq. 4 (or eq. 19 when ``hard``); returns (tokens, swap weights)."""
     decoded, _ = transformer_decode(tr_params, encoded_content, encoded_style, cfg=cfg)
     if hard:
@@ -140,7 +142,7 @@ def swap_encoded(tr_params: Params, encoded_content: jax.Array, encoded_style: j
     return swap.apply_swap(weights, style_tokens), weights
 
 
-def transfer_tokens(tr_params: Params, content_tokens: jax.Array, style_tokens: jax.Array, *, cfg: TGSTConfig,
+def transfer_tokens(tr_params: Params, content_tokens: jax.Array, style_tokens: jax.Array, *, cfg: ModelConfig,
                     hard: bool = False):
     """g^{s|c} from raw tokens ``(batch, Nc, d)``, ``(batch, Ns, d)`` -> (tokens ``(batch, Nc, d)``, aux)."""
     enc_c, aux_c = transformer_encode(tr_params, content_tokens, cfg=cfg)
@@ -149,41 +151,7 @@ def transfer_tokens(tr_params: Params, content_tokens: jax.Array, style_tokens: 
     return tokens, {"swap_weights": weights, "content_cls": aux_c["cls"], "style_cls": aux_s["cls"]}
 
 
-def transformer_loss_terms(tr_params: Params, content_tokens: jax.Array, style_tokens: jax.Array, *,
-                           cfg: TGSTConfig) -> dict[str, jax.Array]:
-    """Per-example loss terms ``(batch,)`` of eqs. 5-11 and their weighted sum (eq. 12) under ``"loss"``.
-
-    Switched-off terms are not computed and reported as zeros.
-    References: Kuriyama et al. 2022, eqs. 5-12.
-    """
-    enc_c, aux_c = transformer_encode(tr_params, content_tokens, cfg=cfg)
-    enc_s, aux_s = transformer_encode(tr_params, style_tokens, cfg=cfg)
-    transferred, _ = swap_encoded(tr_params, enc_c, enc_s, style_tokens, cfg=cfg)  # g^{s|c}, eq. 4
-    zeros = jnp.zeros(content_tokens.shape[:1], content_tokens.dtype)
-    terms = {"identity": zeros, "cyclic": zeros, "structure": zeros, "appearance": zeros}
-    if cfg.use_identity:  # eq. 5: each clip transferred with itself as style
-        c_id, _ = swap_encoded(tr_params, enc_c, enc_c, content_tokens, cfg=cfg)
-        s_id, _ = swap_encoded(tr_params, enc_s, enc_s, style_tokens, cfg=cfg)
-        terms["identity"] = losses.identity_loss(c_id, content_tokens, s_id, style_tokens)
-    if cfg.use_cyclic or cfg.use_structure or cfg.use_appearance:
-        enc_x, aux_x = transformer_encode(tr_params, transferred, cfg=cfg)
-        if cfg.use_cyclic:  # eqs. 6-8: back-transfer with the content as style
-            cyc, _ = swap_encoded(tr_params, enc_x, enc_c, content_tokens, cfg=cfg)
-            terms["cyclic"] = losses.cyclic_loss(cyc, content_tokens)
-        if cfg.use_structure:  # eqs. 9-10
-            terms["structure"] = losses.structure_loss(aux_c["keys"], aux_x["keys"])
-        if cfg.use_appearance:  # eq. 11
-            terms["appearance"] = losses.appearance_loss(aux_s["cls"], aux_x["cls"])
-    terms["loss"] = losses.total_transformer_loss(
-        terms["identity"], terms["cyclic"], terms["structure"], terms["appearance"],
-        lambda_identity=cfg.lambda_identity, lambda_cyclic=cfg.lambda_cyclic,
-        lambda_structure=cfg.lambda_structure, lambda_appearance=cfg.lambda_appearance,
-        use_identity=cfg.use_identity, use_cyclic=cfg.use_cyclic, use_structure=cfg.use_structure,
-        use_appearance=cfg.use_appearance)
-    return terms
-
-
-def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array, *, cfg: TGSTConfig,
+def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array, *, cfg: ModelConfig,
                      method: str = "soft", content_valid=None, style_valid=None):
     """Transfer latents ``(batch, Tc, 16)`` to the style of ``(batch, Ts, 16)``: (``(batch, Tc, 16)``, aux).
 
@@ -207,7 +175,7 @@ def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array
     raise ValueError(f"unknown transfer method {method!r} (expected one of {METHODS})")
 
 
-def encode_pair(ae_params: Params, content_upper: jax.Array, style_upper: jax.Array, *, cfg: TGSTConfig):
+def encode_pair(ae_params: Params, content_upper: jax.Array, style_upper: jax.Array, *, cfg: ModelConfig):
     """Padded content latents, the style latents that the swap sees, and the real latent ranges of both.
 
     The content keeps its padded latents (the decoder needs them as context at the clip ends; the output is
@@ -234,7 +202,7 @@ def _broadcast_style(content_upper, style_upper):
     return style_upper
 
 
-def transfer_arrays(params: Params, content_upper: jax.Array, style_upper: jax.Array, *, cfg: TGSTConfig,
+def transfer_arrays(params: Params, content_upper: jax.Array, style_upper: jax.Array, *, cfg: ModelConfig,
                     method: str = "soft"):
     """Full transfer on arrays: content ``(batch, Fc, 39)`` in the style of ``(batch | 1, Fs, 39)``.
 
@@ -260,7 +228,7 @@ def transfer_arrays(params: Params, content_upper: jax.Array, style_upper: jax.A
 
 
 def swap_weights(params: Params, content_upper: jax.Array, style_upper: jax.Array, *,
-                 cfg: TGSTConfig) -> jax.Array:
+                 cfg: ModelConfig) -> jax.Array:
     """Soft-swap weights (eq. 4) of a transfer, ``(batch, Nc, Ns)``, rows on the simplex.
 
     Row n is content token n of the real clip (token 0 starts at the content's first frame; tokens that

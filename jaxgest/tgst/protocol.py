@@ -136,9 +136,7 @@ def _notes(protocol: Protocol) -> dict:
 
 
 def _joint_indices(motion: Motion, names: Sequence[str]) -> list[int]:
-    sk = motion.skeleton
-    joints = body.load_map(body.detect_map(sk))["joints"]
-    return [sk.index(joints[n]) for n in names]
+    return body.joint_indices(motion.skeleton, names)
 
 
 def style_reference(motion: Motion, protocol="authors") -> Motion:

@@ -37,23 +37,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgest.nn import sinusoidal_positions  # noqa: F401  (eq. 2; re-exported)
 from jaxgest.tgst.config import TransformerConfig
 
 _MASKED = -1e9  # finite, so rows with every key masked (padding) stay NaN-free
-
-
-def sinusoidal_positions(num: int, dim: int, *, angle_scale: float = 1.0) -> np.ndarray:
-    """Positions ``(num, dim)``: pe[p, 2i] = sin(s p f_i), pe[p, 2i+1] = cos(s p f_i), f_i = 10000^(-2i/dim).
-
-    ``angle_scale`` s is 1 for Vaswani et al.; the authors' code uses 2*pi.
-    References: Kuriyama et al. 2022, eq. 2; Vaswani et al. 2017, §3.5.
-    """
-    pos = np.arange(num, dtype=np.float64)[:, None] * angle_scale
-    freq = np.exp(np.arange(0, dim, 2, dtype=np.float64) * (-math.log(10000.0) / dim))
-    pe = np.zeros((num, dim), dtype=np.float64)
-    pe[:, 0::2] = np.sin(pos * freq)
-    pe[:, 1::2] = np.cos(pos * freq[: dim // 2])
-    return pe.astype(np.float32)
 
 
 def band_valid(query_index: np.ndarray, key_index: np.ndarray, *, omega: int, variant: str) -> np.ndarray:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import pathlib
 
+from jaxgest.cli import add_train_arguments, training_data
 from jaxgest.errors import JaxgestError
 
 
@@ -14,17 +15,13 @@ def register(subparsers) -> None:
     p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
 
     t = sub.add_parser("train", help="train (or resume) on a folder of BVH + WAV clips")
-    t.add_argument("--data", default=None, help="folder: ZEGGS layout or manifest.csv with audio "
-                   "(default: the built-in synthetic data, written to W/synthetic-data)")
-    t.add_argument("--workdir", required=True, help="run folder (checkpoints, stats, metrics.jsonl)")
-    t.add_argument("--preset", default="tiny", choices=("tiny", "small", "paper"))
-    t.add_argument("--steps", type=int, default=None,
-                   help="total training steps (default: the preset's, tiny 300, small 8000, paper 120000)")
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
-    t.add_argument("--ckpt-every", type=int, default=None,
-                   help="checkpoint every N steps and at the end (default: a tenth of the steps, at least 50)")
-    t.add_argument("--log-every", type=int, default=25, help="metrics.jsonl line every N steps")
+    add_train_arguments(
+        t, presets=("tiny", "small", "paper"), workdir_help="run folder (checkpoints, stats, metrics.jsonl)",
+        data_help="folder: ZEGGS layout or manifest.csv with audio (default: the built-in synthetic data, "
+        "written to W/synthetic-data)",
+        steps_help="total training steps (default: the preset's, tiny 300, small 8000, paper 120000)",
+        ckpt_every=None, ckpt_help="checkpoint every N steps and at the end (default: a tenth of the steps, "
+        "at least 50)")
     t.add_argument("--override", action="append", default=[], metavar="FIELD=VALUE",
                    help="replace a config field of the preset, e.g. gru_hidden=128 or speech_channels=32,32")
     t.add_argument("--no-loudness", action="store_true",
@@ -63,14 +60,10 @@ def register(subparsers) -> None:
 
 
 def _train(args) -> int:
-    from jaxgest.motion.synthetic.dataset import training_folder
-    from jaxgest.training import check_intervals, check_steps
     from jaxgest.zeggs.train import train
 
     overrides = {**parse_overrides(args.override), **({"loudness": False} if args.no_loudness else {})}
-    check_steps(steps=args.steps)  # before any data is written
-    check_intervals(log_every=args.log_every, ckpt_every=args.ckpt_every)
-    data = training_folder(args.data, args.workdir)  # no --data: the built-in synthetic data, written once
+    data = training_data(args)  # steps and intervals checked before any data is written
     r = train(data, args.workdir, preset=args.preset, steps=args.steps,
               seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
               overrides=overrides)

@@ -52,8 +52,7 @@ def _split_by_style(clips, seed: int = 0):
 
 
 def _hand_indices(motion):
-    jm = body.load_map(body.detect_map(motion.skeleton))["joints"]
-    return [motion.skeleton.index(jm[h]) for h in body.HANDS]
+    return body.joint_indices(motion.skeleton, body.HANDS)
 
 
 def beat_scores(motion, audio, sr: int, *, seed: int = 0) -> dict:

@@ -24,19 +24,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from jaxgest.nn import sinusoidal_positions
 from jaxgest.zeggs.config import ModelConfig
-
-
-def sinusoidal_positions(frames: int, dim: int, timescale: float = 10000.0) -> jax.Array:
-    """Positional encoding ``(frames, dim)``: sin on even channels, cos on odd ones.
-
-    References: Vaswani et al. 2017, §3.5 (as in the authors' ``PositionalEncoding``).
-    """
-    pos = jnp.arange(frames, dtype=jnp.float32)[:, None]
-    div = jnp.exp(jnp.arange(0, dim, 2, dtype=jnp.float32) * (-jnp.log(timescale) / dim))[None, :]
-    pe = jnp.zeros((frames, dim), jnp.float32)
-    pe = pe.at[:, 0::2].set(jnp.sin(pos * div))
-    return pe.at[:, 1::2].set(jnp.cos(pos * div)[:, : dim // 2])
 
 
 def masked_mean(x: jax.Array, mask: jax.Array) -> jax.Array:

@@ -1,0 +1,698 @@
+"""orbax checkpoints of one trained stage, with a stored and checked meta item; workdir format checks.
+
+:class:`Checkpointer` wraps an orbax ``CheckpointManager`` over ``workdir/<subdir>`` keeping
+``{params, opt_state, step}`` plus a JSON ``meta`` item holding the kind of model, its config and the
+skeleton signature; restoring with a different one stops with a one-line
+:class:`~jaxgest.errors.CheckpointError` that names the differing fields. Faults of the environment are one
+line: a checkpoint that cannot be read (truncated, corrupted -- each stores a sha256 of its arrays -- or
+missing files) is skipped for the newest readable one with a one-line warning (:func:`strict_checkpoints` /
+``--strict``: an error instead), a save that cannot complete (disk full, read-only) is a
+:class:`~jaxgest.errors.WriteError` with no partial folder left, and a workdir or checkpoint stamped with a
+newer ``format_version`` (:data:`FORMAT_VERSION`; absent = 1) or naming an unknown model is refused
+(:func:`check_workdir_config`).
+
+No process-wide side effects: absl logging is quietened only around the orbax calls that log expected
+noise (:func:`_quiet_absl`), and the filter of asyncio's "Event loop is closed" errors
+(:func:`closed_loop_errors_muted`) is installed while a Checkpointer is open and removed by
+:meth:`Checkpointer.close` (the command line installs it for the whole command, see :mod:`jaxgest.cli`).
+
+References: STYLE.md (flax examples' orbax usage).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import json
+import logging
+import pathlib
+import sys
+import threading
+import time
+from typing import Any, Callable, Iterable, Mapping, Optional
+
+import jax
+import numpy as np
+
+from jaxgest.errors import CheckpointError, WriteError
+from jaxgest.io import json_default
+
+__all__ = [
+    "Checkpointer",
+    "FORMAT_VERSION",
+    "MODELS",
+    "all_finite",
+    "check_workdir_config",
+    "closed_loop_errors_muted",
+    "mute_closed_loop_errors_for_process",
+    "config_diff",
+    "strict_checkpoints",
+    "warn",
+]
+
+def _normalise(obj):
+    """JSON round trip so tuples/lists and numpy scalars compare equal to what was stored."""
+    return json.loads(json.dumps(obj, sort_keys=True, default=json_default))
+
+
+def config_diff(stored: Mapping, requested: Mapping, prefix: str = "") -> list[str]:
+    """Flattened ``key: stored -> requested`` descriptions of every differing field (sorted)."""
+    out = []
+    keys = sorted(set(stored) | set(requested))
+    for k in keys:
+        a, b = stored.get(k, "<absent>"), requested.get(k, "<absent>")
+        name = f"{prefix}{k}"
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            out.extend(config_diff(a, b, prefix=name + "."))
+        elif a != b:
+            out.append(f"{name}: {a!r} -> {b!r}")
+    return out
+
+
+FORMAT_VERSION = 1
+MODELS = ("tgst", "zeggs")  # what config.json's "model" (earlier TGST workdirs: "kind") may name
+"""Workdir format written by this version (``"format_version"`` in config.json and in each checkpoint's meta;
+absent = 1). A workdir stamped with a newer version is refused with a one-line error."""
+
+_STRICT = contextvars.ContextVar("jaxgest_strict_checkpoints", default=False)
+
+
+@contextlib.contextmanager
+def strict_checkpoints(strict: bool = True):
+    """Within this context an unreadable checkpoint is an error instead of a fall-back to an older one
+    (what ``--strict`` sets for a command)."""
+    token = _STRICT.set(bool(strict))
+    try:
+        yield
+    finally:
+        _STRICT.reset(token)
+
+
+def warn(message: str) -> None:
+    """One ``jaxgest: warning: ...`` line on stderr (a fault that was handled; the command goes on)."""
+    print(f"jaxgest: warning: {message}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _quiet_absl(level=logging.CRITICAL):
+    """orbax logs through absl (read-only option adjustments, missing optional metadata files, and the errors
+    it then raises); those are expected or reported by us in one line, so they are not shown."""
+    logger = logging.getLogger("absl")
+    old = logger.level
+    logger.setLevel(max(level, old))
+    try:
+        yield
+    finally:
+        logger.setLevel(old)
+
+
+_MUTE_LOCK = threading.Lock()
+_MUTE_DEPTH = 0  # how many closed_loop_errors_muted() contexts are open
+_MUTE_PREVIOUS = None  # the hook that was installed before the first of them
+
+
+def _closed_loop_hook(unraisable):
+    exc = unraisable.exc_value
+    if isinstance(exc, RuntimeError) and str(exc) == "Event loop is closed":
+        return
+    (_MUTE_PREVIOUS or sys.__unraisablehook__)(unraisable)
+
+
+def _mute_enter() -> None:
+    global _MUTE_DEPTH, _MUTE_PREVIOUS
+    with _MUTE_LOCK:
+        if _MUTE_DEPTH == 0:
+            _MUTE_PREVIOUS = sys.unraisablehook
+            sys.unraisablehook = _closed_loop_hook
+        _MUTE_DEPTH += 1
+
+
+def _mute_exit() -> None:
+    global _MUTE_DEPTH, _MUTE_PREVIOUS
+    with _MUTE_LOCK:
+        _MUTE_DEPTH -= 1
+        if _MUTE_DEPTH == 0:
+            if sys.unraisablehook is _closed_loop_hook:
+                sys.unraisablehook = _MUTE_PREVIOUS
+            _MUTE_PREVIOUS = None
+
+
+@contextlib.contextmanager
+def closed_loop_errors_muted():
+    """Within this context, drop the "RuntimeError: Event loop is closed" tracebacks (and only those) that
+    ``sys.unraisablehook`` would print.
+
+    When orbax gives up on a damaged checkpoint (or a failed save), tensorstore still completes the
+    outstanding reads/writes and their callbacks hit orbax's already closed asyncio loop: each prints such a
+    traceback (while orbax gives up, or later). Every other unraisable error goes to the previous hook.
+    Reentrant: the hook is installed by the outermost context and the previous one restored when it ends
+    (if nobody replaced it meanwhile). A :class:`Checkpointer` holds one open from construction to
+    :meth:`~Checkpointer.close`.
+    """
+    _mute_enter()
+    try:
+        yield
+    finally:
+        _mute_exit()
+
+
+def mute_closed_loop_errors_for_process() -> None:
+    """The filter of :func:`closed_loop_errors_muted` for the rest of the process: for an application's entry
+    point only (``jaxgest.cli.main``), where such callbacks can still fire at interpreter exit. Library code
+    uses the context manager."""
+    _mute_enter()
+
+
+class _Unreadable(Exception):
+    """A checkpoint step that cannot be read (truncated/corrupted/missing files): ``reason`` says how."""
+
+
+def _reason(e: BaseException) -> str:
+    """A short description of why orbax/tensorstore could not read a checkpoint."""
+    if isinstance(e, _Unreadable):
+        return str(e)
+    texts, seen, x = [], set(), e
+    while x is not None and id(x) not in seen:  # the whole cause chain: orbax wraps tensorstore's error
+        seen.add(id(x))
+        texts.append((str(x).strip().splitlines() or [""])[0])
+        x = x.__cause__ or x.__context__
+    chain = " | ".join(texts)
+    if isinstance(e, json.JSONDecodeError) or "JSONDecodeError" in chain or "Expecting " in chain:
+        return "its metadata is not valid JSON"
+    if any(m in chain for m in ("OUT_OF_RANGE", "byte range", "DATA_LOSS", "Error decoding", "corrupt")):
+        return "a data file is truncated or corrupted"
+    missing = ("NOT_FOUND", "No such file", "does not exist", "not found", "Not found")
+    if isinstance(e, FileNotFoundError) or any(m in chain for m in missing):
+        return "a file is missing"
+    if "Encountered error while reading" in chain:
+        return "a data file is missing or corrupted"
+    text = texts[0]
+    short = text if len(text) <= 100 else text[:97] + "..."
+    return f"{type(e).__name__}: {short}" if short else type(e).__name__
+
+
+def _digest(tree) -> Optional[str]:
+    """sha256 of a pytree's arrays (names, shapes, dtypes, bytes; order-independent of the container types),
+    saved in a checkpoint's meta and verified on restore: a flipped byte that still decodes is caught too.
+    None when an array is not addressable from this process (multi-host sharded state: not checked)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    try:
+        leaves = sorted((_path_names(p), x) for p, x in jax.tree_util.tree_flatten_with_path(tree)[0])
+        for name, x in leaves:
+            a = np.ascontiguousarray(np.asarray(jax.device_get(x)))
+            h.update(repr((name, a.shape, a.dtype.str)).encode())
+            h.update(a.tobytes())
+    except Exception:  # noqa: BLE001  (not fully addressable)
+        return None
+    return h.hexdigest()
+
+
+def _flat(d: Mapping, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, Mapping):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def _path_names(path) -> tuple:
+    """A pytree key path as plain names, so optax namedtuples (attributes) compare equal to orbax's stored
+    dict/list metadata."""
+    out = []
+    for k in path:
+        for attr in ("key", "idx", "name"):
+            if hasattr(k, attr):
+                out.append(str(getattr(k, attr)))
+                break
+        else:
+            out.append(str(k))
+    return tuple(out)
+
+
+def _shapes(tree) -> dict:
+    return {_path_names(p): tuple(x.shape) for p, x in jax.tree_util.tree_flatten_with_path(tree)[0]}
+
+
+class Checkpointer:
+    """orbax ``CheckpointManager`` over ``workdir/checkpoints`` with a config/skeleton-checked meta item.
+
+    Restoring takes the newest *readable* checkpoint: a step whose files are truncated, corrupted or missing
+    is reported in one warning line naming the workdir, the stage and the step, and the previous one is used
+    (:func:`strict_checkpoints` / ``--strict``: a one-line :class:`CheckpointError` instead). Nothing is
+    deleted: a training run (not read-only) that falls back moves the unreadable step folder aside to
+    ``<subdir>.unreadable-step-<N>`` so that step can be trained and saved again. A save that cannot complete
+    (full disk, read-only folder) is a one-line :class:`CheckpointError`; its partial temporary folder is
+    removed and the earlier checkpoints are untouched.
+
+    Args:
+      workdir: the run directory.
+      kind: what is trained (``"tgst_autoencoder"``, ``"tgst_transformer"``, ``"zeggs"``); part of the check.
+      config: JSON-serialisable model/training config; compared on restore.
+      skeleton: optional skeleton signature string; compared on restore.
+      subdir: checkpoint folder name inside the workdir (one per trained stage).
+      max_to_keep: how many step checkpoints to keep (at least two, so there is one to fall back to).
+      ignore: config keys not compared on restore (e.g. the requested number of steps).
+      read_config: maps a stored config (of an older layout) to the current one before it is compared.
+      read_only: open for inference (nothing is created, moved or cleaned up).
+      strict: refuse to fall back past an unreadable checkpoint (default: :func:`strict_checkpoints`).
+    """
+
+    def __init__(
+        self,
+        workdir,
+        *,
+        kind: str,
+        config: Mapping,
+        skeleton: Optional[str] = None,
+        subdir: str = "checkpoints",
+        max_to_keep: int = 2,
+        ignore: Iterable[str] = ("steps",),
+        read_config: Optional[Callable[[Mapping], Mapping]] = None,
+        read_only: bool = False,
+        strict: Optional[bool] = None,
+    ):
+        import orbax.checkpoint as ocp
+
+        self._ocp = ocp
+        self.workdir = pathlib.Path(workdir)
+        self.directory = (self.workdir / subdir).resolve()
+        self.kind = kind
+        self.stage = pathlib.PurePath(subdir).name if subdir != "checkpoints" else kind
+        self.ignore = tuple(ignore)
+        self.read_config = read_config
+        self.read_only = read_only
+        self.strict = strict
+        self.restored_step: Optional[int] = None  # the step the last restore used
+        self.meta = _normalise({"kind": kind, "config": dict(config), "skeleton": skeleton})
+        check_workdir_config(self.workdir, kind, lenient=True)
+        if read_only and not self.directory.is_dir():
+            raise CheckpointError(f"{self.workdir}: no checkpoint found (missing {self.directory.name}/)")
+        if not read_only:
+            try:
+                self.directory.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise CheckpointError(f"{self.directory}: cannot create the checkpoint folder "
+                                      f"({e.strerror or e})") from None
+        # before any read (a damaged file's callbacks fire while orbax gives up); removed by close()
+        self._muted = contextlib.ExitStack()
+        self._muted.enter_context(closed_loop_errors_muted())
+        try:
+            with _quiet_absl(logging.ERROR):  # read-only: expected warnings about the options orbax adjusts
+                options = ocp.CheckpointManagerOptions(
+                    max_to_keep=max(int(max_to_keep), 1),
+                    create=not read_only,
+                    enable_async_checkpointing=False,
+                    cleanup_tmp_directories=not read_only,
+                    read_only=read_only,
+                )
+                self.manager = ocp.CheckpointManager(self.directory, options=options,
+                                                     item_names=("state", "meta"))
+        except BaseException:
+            self._muted.close()
+            raise
+
+    def _strict(self) -> bool:
+        return _STRICT.get() if self.strict is None else bool(self.strict)
+
+    def _where(self, step) -> str:
+        return f"{self.workdir}: {self.stage} checkpoint at step {step}"
+
+    # -- queries -----------------------------------------------------------------------------------------
+    def latest_step(self) -> Optional[int]:
+        return self.manager.latest_step()
+
+    def all_steps(self) -> list[int]:
+        return sorted(int(s) for s in self.manager.all_steps())
+
+    def _read_meta(self, step: int) -> dict:
+        try:
+            with _quiet_absl():
+                restored = self.manager.restore(
+                    step, args=self._ocp.args.Composite(meta=self._ocp.args.JsonRestore()))
+            meta = restored["meta"]
+            if not isinstance(meta, Mapping):
+                raise _Unreadable("its meta item is not a JSON object")
+        except MemoryError:
+            raise
+        except Exception as e:  # noqa: BLE001  (orbax/tensorstore raise many types for a damaged file)
+            raise _Unreadable(_reason(e)) from None
+        return dict(meta)
+
+    def stored_meta(self, step: Optional[int] = None) -> Optional[dict]:
+        """The meta item of ``step`` (default: the newest checkpoint whose meta is readable; None if none)."""
+        if step is not None:
+            try:
+                return self._read_meta(step)
+            except _Unreadable as e:
+                raise CheckpointError(f"{self._where(step)} is unreadable ({e})") from None
+        for s in reversed(self.all_steps()):
+            try:
+                return self._read_meta(s)
+            except _Unreadable:
+                continue
+        return None
+
+    def check_meta(self, stored: Optional[Mapping]) -> None:
+        """Raise :class:`CheckpointError` naming what differs between the stored and requested meta."""
+        if stored is None:
+            return
+        version = stored.get("format_version", 1)
+        if not isinstance(version, int) or version > FORMAT_VERSION:
+            raise CheckpointError(
+                f"{self.directory}: checkpoint written by a newer jaxgest (format version {version}; this "
+                f"one reads up to {FORMAT_VERSION}); upgrade jaxgest, or retrain into a new --workdir")
+        problems = []
+        if stored.get("kind") != self.meta["kind"]:
+            problems.append(f"model kind: {stored.get('kind')!r} -> {self.meta['kind']!r}")
+        if stored.get("skeleton") != self.meta["skeleton"] and self.meta["skeleton"] is not None:
+            problems.append(f"skeleton signature: {stored.get('skeleton')} -> {self.meta['skeleton']}")
+        stored_config = stored.get("config") or {}
+        if self.read_config is not None:
+            stored_config = _normalise(dict(self.read_config(stored_config)))
+        a = {k: v for k, v in stored_config.items() if k not in self.ignore}
+        b = {k: v for k, v in self.meta["config"].items() if k not in self.ignore}
+        diff = config_diff(a, b)
+        fa, fb = _flat(a), _flat(b)
+        missing, extra = sorted(set(fb) - set(fa)), sorted(set(fa) - set(fb))
+        changed = [k for k in set(fa) & set(fb) if fa[k] != fb[k]]
+        if not problems and not changed and (missing or extra):
+            # only fields added or removed between versions of jaxgest: another layout, not another preset
+            what = "; ".join(x for x in (
+                f"without {', '.join(missing[:4])}" if missing else "",
+                f"with unknown {', '.join(extra[:4])}" if extra else "") if x)
+            older = "an older" if not extra else ("a newer" if not missing else "another")
+            raise CheckpointError(
+                f"{self.directory}: checkpoint from {older} version of jaxgest (config {what}); retrain "
+                "into a new --workdir with this version (checkpoints are not converted)")
+        problems.extend(diff)
+        if problems:
+            shown = "; ".join(problems[:4]) + (f"; and {len(problems) - 4} more" if len(problems) > 4 else "")
+            raise CheckpointError(
+                f"{self.directory}: checkpoint does not match the requested model ({shown}); "
+                "use another --workdir or the same preset"
+            )
+
+    # -- save / restore ----------------------------------------------------------------------------------
+    def save(self, state, *, force: bool = False) -> None:
+        """Save ``{params, opt_state, step}`` and the meta item at ``state.step``.
+
+        A save that cannot complete (full disk, read-only folder, ...) raises a one-line
+        :class:`CheckpointError`; its partial temporary folder is removed, earlier checkpoints stay.
+        """
+        step = int(jax.device_get(state.step))
+        payload = {"params": state.params, "opt_state": state.opt_state, "step": state.step}
+        before = set(self._tmp_folders())
+        meta = {**self.meta, "format_version": FORMAT_VERSION}
+        digest = _digest(payload)
+        if digest is not None:
+            meta["sha256"] = digest
+        try:
+            with _quiet_absl():
+                self.manager.save(
+                    step,
+                    args=self._ocp.args.Composite(
+                        state=self._ocp.args.StandardSave(payload), meta=self._ocp.args.JsonSave(meta)),
+                    force=force,
+                )
+                self.manager.wait_until_finished()
+        except MemoryError:
+            raise
+        except Exception as e:  # noqa: BLE001
+            self._settle()
+            self._remove_partial(step, before)
+            last = [s for s in self.all_steps() if s != step]
+            kept = (f"the last good checkpoint (step {last[-1]}) is kept" if last else
+                    "no checkpoint was written")
+            raise WriteError(f"{self._where(step)} could not be written ({_write_reason(e)}); stopped, "
+                                  f"{kept}") from None
+
+    def _settle(self, timeout: float = 120.0) -> None:
+        """After a failed save: let orbax's background writer threads of the other items end (quietly: they
+        fail too, and would log tracebacks and asyncio 'Event loop is closed' errors) before cleaning up."""
+        import threading
+
+        try:
+            from orbax.checkpoint._src.futures.future import _SignalingThread as orbax_thread
+        except ImportError:  # another orbax layout: wait for every non-daemon helper thread instead
+            orbax_thread = threading.Thread
+        deadline = time.monotonic() + timeout
+        with _quiet_absl():
+            for t in threading.enumerate():
+                if t is not threading.current_thread() and isinstance(t, orbax_thread) and t.is_alive():
+                    t.join(max(deadline - time.monotonic(), 0.0))
+            with contextlib.suppress(Exception):
+                self.manager.wait_until_finished()
+
+    def _tmp_folders(self) -> list:
+        try:
+            return [p for p in self.directory.iterdir() if "orbax-checkpoint-tmp" in p.name]
+        except OSError:
+            return []
+
+    def _remove_partial(self, step: int, before) -> None:
+        """Remove what a failed save of ``step`` left (its temporary folder; the step folder if it is new)."""
+        import shutil
+
+        for p in self._tmp_folders():
+            if p not in before:
+                shutil.rmtree(p, ignore_errors=True)
+        final = self.directory / str(step)
+        if final.is_dir() and not (final / "_CHECKPOINT_METADATA").is_file():
+            shutil.rmtree(final, ignore_errors=True)
+        try:
+            with _quiet_absl():
+                self.manager.reload()
+        except Exception:  # noqa: BLE001
+            pass
+
+    def _candidates(self, step: Optional[int]) -> list[int]:
+        steps = self.all_steps()
+        if step is not None:
+            return [int(step)]
+        return list(reversed(steps))
+
+    def _restore_newest(self, read: Callable[[int], Any], step: Optional[int]):
+        """``(step, read(step))`` of the newest readable checkpoint; one warning line per fall-back."""
+        bad: list[tuple[int, str]] = []
+        for s in self._candidates(step):
+            try:
+                out = read(s)
+            except _Unreadable as e:
+                bad.append((s, str(e)))
+                if self._strict() or step is not None:
+                    older = [t for t in self.all_steps() if t < s]
+                    hint = (f"; --strict: not falling back to step {older[-1]}" if older and step is None else
+                            f"; restore {self.directory.name}/ from a backup or retrain into a new --workdir")
+                    raise CheckpointError(f"{self._where(s)} is unreadable ({e}){hint}") from None
+                continue
+            if bad:
+                self._report_fallback(bad, s)
+            self.restored_step = s
+            return s, out
+        if bad:
+            listed = "; ".join(f"step {s}: {r}" for s, r in bad)
+            raise CheckpointError(f"{self.workdir}: no readable {self.stage} checkpoint ({listed}); restore "
+                                  f"{self.directory.name}/ from a backup, or move it aside to train from "
+                                  "scratch")
+        return None, None
+
+    def _report_fallback(self, bad, used: int) -> None:
+        steps = ", ".join(str(s) for s, _ in bad)
+        reasons = "; ".join(sorted({r for _, r in bad}))
+        what = (f"{self.workdir}: {self.stage} checkpoint at step {steps} is unreadable ({reasons})"
+                if len(bad) == 1 else
+                f"{self.workdir}: {self.stage} checkpoints at steps {steps} are unreadable ({reasons})")
+        if self.read_only:
+            warn(f"{what}; using step {used} instead (nothing was changed; --strict refuses)")
+            return
+        moved = [self._set_aside(s) for s, _ in bad]
+        with _quiet_absl():
+            self.manager.reload()
+        warn(f"{what}; resuming from step {used} (moved to {', '.join(moved)}; nothing was deleted)")
+
+    def _set_aside(self, step: int) -> str:
+        src = self.directory / str(step)
+        dst = self.directory.with_name(f"{self.directory.name}.unreadable-step-{step}")
+        k = 1
+        while dst.exists():
+            k += 1
+            dst = self.directory.with_name(f"{self.directory.name}.unreadable-step-{step}.{k}")
+        if jax.process_index() == 0:
+            try:
+                src.rename(dst)
+            except OSError as e:
+                raise CheckpointError(f"{self._where(step)} is unreadable and cannot be moved aside "
+                                      f"({e.strerror or e}); move {src} away by hand") from None
+        if jax.process_count() > 1:
+            from jax.experimental import multihost_utils
+
+            multihost_utils.sync_global_devices(f"jaxgest: unreadable {self.stage} step {step} set aside")
+        try:
+            return str(dst.relative_to(self.workdir.resolve()))
+        except ValueError:
+            return str(dst)
+
+    def _read_state(self, step: int, abstract):
+        """Restore ``{params, opt_state, step}`` of ``step`` (``abstract``: target structure, or None)."""
+        meta = self._read_meta(step)
+        self.check_meta(meta)
+        args = (self._ocp.args.StandardRestore(abstract) if abstract is not None else
+                self._ocp.args.StandardRestore())
+        try:
+            with _quiet_absl():
+                restored = self.manager.restore(step, args=self._ocp.args.Composite(state=args))["state"]
+        except MemoryError:
+            raise
+        except Exception as e:  # noqa: BLE001
+            if abstract is not None:
+                mismatch = self._structure_mismatch(step, abstract)
+                if mismatch:
+                    raise CheckpointError(f"{self.directory}: checkpoint at step {step} does not fit this "
+                                          f"model ({mismatch})") from None
+            raise _Unreadable(_reason(e)) from None
+        if meta.get("sha256") is not None and _digest(restored) not in (None, meta["sha256"]):
+            raise _Unreadable("its arrays do not match the checksum saved with them")
+        if not bool(jax.device_get(all_finite(restored))):
+            raise _Unreadable("it holds NaN/inf values, which training never saves")
+        return restored
+
+    def _structure_mismatch(self, step: int, abstract) -> Optional[str]:
+        """How the stored tree differs from ``abstract`` (None: it does not, or its metadata is damaged)."""
+        try:
+            with _quiet_absl():
+                md = self._ocp.StandardCheckpointer().metadata(self.directory / str(step) / "state")
+            stored = _shapes(getattr(md, "item_metadata", md))
+        except Exception:  # noqa: BLE001
+            return None
+        want = _shapes(abstract)
+        if stored == want or not stored:  # nothing listed: the tree metadata itself is damaged
+            return None
+        missing = sorted(set(want) - set(stored))
+        extra = sorted(set(stored) - set(want))
+        shape = sorted(k for k in set(want) & set(stored) if want[k] != stored[k])
+        parts = []
+        if missing:
+            parts.append(f"{len(missing)} missing, e.g. {'.'.join(missing[0])}")
+        if extra:
+            parts.append(f"{len(extra)} unexpected, e.g. {'.'.join(extra[0])}")
+        if shape:
+            k = shape[0]
+            parts.append(f"{len(shape)} of another shape, e.g. {'.'.join(k)} {stored[k]} vs {want[k]}")
+        return "arrays: " + "; ".join(parts)
+
+    def restore(self, state, step: Optional[int] = None):
+        """Restore into the structure of ``state`` (shapes/dtypes/shardings taken from it).
+
+        Returns ``state`` unchanged when the workdir holds no checkpoint yet. Without ``step``, the newest
+        readable checkpoint (see the class docstring).
+        """
+        target = {"params": state.params, "opt_state": state.opt_state, "step": state.step}
+        abstract = jax.tree_util.tree_map(_abstract_like, target)
+        s, restored = self._restore_newest(lambda t: self._read_state(t, abstract), step)
+        if s is None:
+            return state
+        return state.replace(params=restored["params"], opt_state=restored["opt_state"], step=restored["step"])
+
+    def restore_params(self, params_template, step: Optional[int] = None):
+        """Restore only the parameters (inference); raises CheckpointError when there is no checkpoint."""
+        s, restored = self._restore_newest(lambda t: self._read_state(t, None), step)
+        if s is None:
+            raise CheckpointError(f"{self.workdir}: no checkpoint found in {self.directory.name}/")
+        params = restored["params"]
+        want = jax.tree_util.tree_structure(params_template)
+        got = jax.tree_util.tree_structure(params)
+        if want != got:
+            raise CheckpointError(f"{self.directory}: checkpoint parameters do not fit this model")
+        return jax.tree_util.tree_map(lambda t, x: np.asarray(x).astype(t.dtype), params_template, params)
+
+    def __enter__(self) -> "Checkpointer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        # orbax starts a thread at construction that removes unfinished temporary checkpoints of earlier runs;
+        # wait for it too, or a process that exits right away (nothing to train) logs a RuntimeError from it.
+        try:
+            getattr(self.manager, "_maybe_await_cleanup_tmp_directory", lambda: None)()
+            self.manager.wait_until_finished()
+            self.manager.close()
+        finally:
+            self._muted.close()
+
+
+def _write_reason(e: BaseException) -> str:
+    """Why a write failed, short: the OS error (e.g. 'No space left on device') when there is one."""
+    first, seen = e, set()
+    while e is not None and id(e) not in seen:
+        seen.add(id(e))
+        if isinstance(e, OSError) and e.strerror:
+            return e.strerror
+        text = str(e)
+        for marker, say in (("No space left", "No space left on device"), ("Read-only file system",
+                            "Read-only file system"), ("Permission denied", "Permission denied")):
+            if marker in text:
+                return say
+        e = e.__cause__ or e.__context__
+    return _reason(first)
+
+
+def check_workdir_config(workdir, kind: Optional[str] = None, *, lenient: bool = False) -> Optional[dict]:
+    """The workdir's config.json as a dict (None when there is none), after the format checks.
+
+    One-line :class:`CheckpointError` when it is not valid JSON (``lenient``: None instead -- a checkpointer
+    leaves that to the loader, and training rewrites the file), when it carries a ``format_version`` newer
+    than :data:`FORMAT_VERSION` (absent = 1), when it names no model this version knows, or another model
+    than ``kind`` (``"tgst_autoencoder"`` -> ``tgst``; kinds outside :data:`MODELS` are not checked).
+    """
+    workdir = pathlib.Path(workdir)
+    path = workdir / "config.json"
+    if not path.is_file():
+        return None
+    try:
+        stored = json.loads(path.read_text())
+        if not isinstance(stored, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        why = (e.strerror if isinstance(e, OSError) and e.strerror else
+               "not valid JSON: truncated or corrupted?")
+        if lenient:
+            return None
+        raise CheckpointError(f"{path}: unreadable ({why}); restore it from a backup or retrain into a new "
+                              "--workdir") from None
+    version = stored.get("format_version", 1)
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        raise CheckpointError(f"{path}: format_version {version!r} is not a version number; retrain into a "
+                              "new --workdir")
+    if version > FORMAT_VERSION:
+        raise CheckpointError(f"{workdir}: written by a newer jaxgest (workdir format {version}, this "
+                              f"version reads up to {FORMAT_VERSION}); upgrade jaxgest, or retrain into a new "
+                              "--workdir")
+    model = stored.get("model", stored.get("kind"))  # "kind": TGST workdirs of earlier versions
+    if model not in MODELS:
+        raise CheckpointError(f"{workdir}: config.json names {'no model' if model is None else repr(model)} "
+                              f"(this jaxgest knows {', '.join(MODELS)}): an older layout or not a jaxgest "
+                              "workdir; retrain into a new --workdir")
+    family = (kind or "").split("_")[0]
+    if family in MODELS and model != family:
+        raise CheckpointError(f"{workdir}: a {model} workdir, not a {family} one; use another --workdir")
+    return stored
+
+
+def _abstract_like(x):
+    x = jax.numpy.asarray(x) if not hasattr(x, "shape") else x
+    sharding = getattr(x, "sharding", None)
+    return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding)
+
+
+@jax.jit
+def all_finite(tree) -> jax.Array:
+    """Whether every inexact leaf of ``tree`` is finite (a scalar bool array)."""
+    leaves = [jax.numpy.all(jax.numpy.isfinite(x)) for x in jax.tree_util.tree_leaves(tree)
+              if jax.numpy.issubdtype(x.dtype, jax.numpy.inexact)]
+    return jax.numpy.all(jax.numpy.stack(leaves)) if leaves else jax.numpy.bool_(True)

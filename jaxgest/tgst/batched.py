@@ -1,0 +1,154 @@
+"""Batched, length-bucketed TGST transfers of many content/style pairs, and soft-swap diagnostics.
+
+:class:`BatchedTransfer` runs every method of one pair in one jitted call, with content and style padded to
+:func:`bucket_length`, so a whole dataset costs a few compilations (used by :func:`jaxgest.tgst.evaluate.
+evaluate`). :func:`swap_diagnostics` summarises how the soft swap blends style tokens.
+References: Kuriyama et al. 2022, eq. 4 (swap weights), §4.3.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import jax
+import numpy as np
+
+from jaxgest.errors import DataError
+from jaxgest.tgst import model as tgst_model
+from jaxgest.tgst.config import InferenceConfig
+
+DEFAULT_BUCKET = InferenceConfig.bucket  # length-bucket ratio of batched transfers
+
+
+def bucket_length(frames: int, ratio: float = DEFAULT_BUCKET, *, multiple: int = 16, base: int = 64) -> int:
+    """Padded length of a ``frames``-frame clip: the smallest of base, base * ratio, base * ratio^2, ...
+    (each rounded up to a multiple of ``multiple``) that holds it. ``ratio <= 1``: no bucketing (the
+    clip's own length). Few distinct lengths -> few compilations; at most ``ratio``x the frames.
+    """
+    if ratio <= 1.0:
+        return int(frames)
+    k = base
+    while k < frames:
+        k = max(k + multiple, int(math.ceil(k * ratio / multiple)) * multiple)
+    return k
+
+
+def _num_tokens(frames: int, cfg) -> int:
+    """Tokens whose frames all lie in the first ``frames`` frames (token m covers latent frames
+    m*h .. m*h + w - 1)."""
+    red, w, h = cfg.autoencoder.time_reduction, cfg.token_width, cfg.token_stride
+    latent = frames // red
+    return 0 if latent < w else (latent - w) // h + 1
+
+
+def _swap_weights(params, content_upper, style_upper, *, cfg):
+    """Soft-swap weights ``(batch, Nc, Ns)`` of a transfer, row n = content token n from the content's first
+    frame, column m = style token m from the style's first frame (the one call site of the model's API)."""
+    fn = getattr(tgst_model, "swap_weights", None)
+    if fn is not None:
+        return fn(params, content_upper, style_upper, cfg=cfg)
+    return tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method="soft")[2]["swap_weights"]
+
+
+def _pair_outputs(params, content_upper, style_upper, *, cfg, methods: tuple, weights: bool):
+    """Every method's transfer of one (padded) pair, plus the soft-swap weights (None without ``weights``)."""
+    outs = {}
+    for m in methods:
+        up, lo, _ = tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method=m)
+        outs[m] = (up, lo)
+    w = _swap_weights(params, content_upper, style_upper, cfg=cfg) if weights else None
+    return outs, w
+
+
+#: one jitted call per pair; jit's own cache compiles once per (config, methods, bucket shapes)
+_pair_jit = jax.jit(_pair_outputs, static_argnames=("cfg", "methods", "weights"))
+
+
+class BatchedTransfer:
+    """Transfers of many pairs with a trained :class:`jaxgest.tgst.api.TGSTModel` and few compilations.
+
+    Each clip is converted to body exp-maps at the model rate once; content and style are padded at the end
+    to :func:`bucket_length` (``ratio``; <= 1 = exact, no padding), every method runs in one jitted call per
+    pair, and the outputs are cut back to the content's frames and written on its skeleton
+    (:meth:`TGSTModel.to_motion`). Pairs that share a bucket shape share one compilation.
+
+    Padding (``pad_mode``, any ``numpy.pad`` mode): "wrap" (default) continues each clip with its own first
+    frames, so the extra style tokens are copies of real style tokens and both clips' per-channel statistics
+    (AdaIN, Avatar-net whitening) stay close to the real ones; "edge" (held last pose) shrinks the content's
+    std and biased AdaIN's mean style error by -0.013 m/s (3 standard errors) against exact shapes on
+    Bandai-Namco, while "wrap" stays within 1.5 standard errors of exact for every method (README). The
+    padding reaches the real frames only through the transformer's attention (band and CLS), the swap and
+    the baselines' statistics; the padded output frames are cut off.
+    """
+
+    def __init__(self, model, methods: Sequence[str], *, ratio: float = DEFAULT_BUCKET, diagnostics: bool = True,
+                 pad_mode: str = "wrap"):
+        self.model, self.methods, self.ratio, self.pad_mode = model, tuple(methods), float(ratio), pad_mode
+        self.diagnostics = diagnostics and any(m in ("soft", "hard") for m in self.methods)
+        self._arrays: dict = {}
+        self.shapes: set = set()
+
+    def body(self, clip, role: str) -> np.ndarray:
+        key = id(clip)
+        if key not in self._arrays:
+            self._arrays[key] = (clip, self.model.body_arrays(clip.motion, role))
+        return self._arrays[key][1]
+
+    def run(self, pair) -> tuple[dict, dict | None]:
+        """``({method: Motion}, swap diagnostics or None)`` of one pair (``pair.content`` / ``pair.style``:
+        dataset clips, as in :class:`jaxgest.tgst.evaluate.Pair`); DataError for unusable clips."""
+        cu, su = self.body(pair.content, "content"), self.body(pair.style, "style")
+        fc, fs = len(cu), len(su)
+        bc, bs = bucket_length(fc, self.ratio), bucket_length(fs, self.ratio)
+        self.shapes.add((bc, bs))
+        c = np.pad(cu, ((0, bc - fc), (0, 0)), mode=self.pad_mode)[None]
+        s = np.pad(su, ((0, bs - fs), (0, 0)), mode=self.pad_mode)[None]
+        outs, w = _pair_jit(self.model.params, c, s, cfg=self.model.cfg, methods=self.methods,
+                            weights=self.diagnostics)
+        results = {}
+        for m, (up, lo) in outs.items():
+            results[m] = self.model.to_motion(np.asarray(up[0, :fc]), np.asarray(lo[0, :fc]),
+                                              pair.content.motion)
+        diag = None
+        if w is not None:
+            nc, ns = _num_tokens(fc, self.model.cfg), _num_tokens(fs, self.model.cfg)
+            diag = swap_diagnostics(np.asarray(w[0]), nc, ns) if nc and ns else None
+        return results, diag
+
+
+def swap_diagnostics(weights: np.ndarray, num_queries: int | None = None, num_style: int | None = None) -> dict:
+    """How a soft swap blends: statistics of swap weights ``(Nc, Ns)`` (rows on the simplex).
+
+    Rows are content tokens from the content's first frame, columns style tokens from the style's first
+    frame (same model rate, so equal indices are equal times). Only the first ``num_queries`` rows (tokens of
+    the real content) are used; columns past ``num_style`` (padding of the style) stay in the rows as the
+    swap saw them and their total weight is reported as ``padding_mass``. Returns::
+
+        {"max_weight": mean over rows of max_m w_nm,
+         "effective_tokens": mean over rows of 1 / sum_m w_nm^2 (1 = one token, Ns = uniform),
+         "argmax_within_1": fraction of rows whose argmax m has |m - n| <= 1,
+         "chance_within_1": that fraction for an argmax uniform over the Ns real style tokens,
+         "padding_mass", "num_queries", "num_style"}
+
+    References: Kuriyama et al. 2022, eq. 4 (the soft swap weights W).
+    """
+    w = np.asarray(weights, np.float64)
+    if w.ndim != 2 or w.size == 0:
+        raise DataError(f"swap_diagnostics: expected weights (Nc, Ns), got shape {w.shape}")
+    nq = w.shape[0] if num_queries is None else min(int(num_queries), w.shape[0])
+    ns = w.shape[1] if num_style is None else min(int(num_style), w.shape[1])
+    w = w[:nq]
+    n = np.arange(nq)
+    am = w.argmax(axis=1)
+    lo, hi = np.maximum(n - 1, 0), np.minimum(n + 1, ns - 1)
+    chance = np.maximum(hi - lo + 1, 0) / ns
+    return {
+        "max_weight": float(w.max(axis=1).mean()),
+        "effective_tokens": float((1.0 / np.sum(w**2, axis=1)).mean()),
+        "argmax_within_1": float(np.mean(np.abs(am - n) <= 1)),
+        "chance_within_1": float(chance.mean()),
+        "padding_mass": float(w[:, ns:].sum(axis=1).mean()),
+        "num_queries": int(nq),
+        "num_style": int(ns),
+    }

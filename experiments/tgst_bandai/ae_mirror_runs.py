@@ -6,9 +6,11 @@ MODE: ``new`` (mirrored clips by :func:`jaxgest.tgst.data.mirror_motion`, the ri
 reference: the current pipeline), ``old`` (the previous offset-inferred mirror, :mod:`old_mirror`, swapped
 into the data pipeline), ``none`` (``ae_mirror=False``: original clips only). The cosine schedule is
 shortened to STEPS (``ae_lr_decay_steps=STEPS``) so a short run ends at the schedule's end. Extra
-``key=value`` pairs are config overrides (ints as ints), e.g. ``autoencoder.latent_dim=32``.
+``key=value`` pairs are config overrides (Python literals), e.g.
+``autoencoder.encoder_channels=(64,32,32)`` (latent width d_z = 32).
 Evaluate with diagnose.py WORKDIR EVAL_DIR OUT.json TRAIN_DIR --no-swap.
 """
+import ast
 import pathlib
 import sys
 
@@ -19,13 +21,13 @@ from jaxgest.tgst.train import format_summary, train  # noqa: E402
 
 
 def _value(v):
+    """``"32"`` -> 32, ``"(64,32,32)"`` -> (64, 32, 32), ``"true"`` -> True, other text as is."""
+    if v.lower() in ("true", "false"):
+        return v.lower() == "true"
     try:
-        return int(v)
-    except ValueError:
-        try:
-            return float(v)
-        except ValueError:
-            return {"true": True, "false": False}.get(v.lower(), v)
+        return ast.literal_eval(v)
+    except (ValueError, SyntaxError):
+        return v
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Autoencoder and swap diagnostics on the held-out clips: what the model does before any style is involved.
 
     python experiments/tgst_bandai/diagnose.py WORKDIR EVAL_DIR OUT.json [TRAIN_DIR] [--ae-step N] [--no-swap]
-        [--edge-frames N]
+        [--edge-frames N] [--angles-only]
 
 1. Reconstruction against baselines with the same inputs (upper body, 13 joints, model rate, geodesic
    angle per joint, degrees): the autoencoder round trip (jaxgest.tgst.model.reconstruct: the clip-end
@@ -77,6 +77,7 @@ def main(argv) -> int:
     ap.add_argument("train_dir", nargs="?")
     ap.add_argument("--ae-step", type=int, default=None)
     ap.add_argument("--no-swap", action="store_true")
+    ap.add_argument("--angles-only", action="store_true", help="section 1 only (no round trips, no swap)")
     ap.add_argument("--edge-frames", type=int, default=None,
                     help="override the config's edge padding (0 = the old end-only padding, for comparison)")
     args = ap.parse_args(argv[1:])
@@ -112,7 +113,9 @@ def main(argv) -> int:
 
         # fitted once per TRAIN_DIR (cache beside the workdirs): PCA-16 and mean pose on the original clips, and
         # PCA-16 / mean pose on the original + mirrored clips (the mirror of the data pipeline)
-        cache = pathlib.Path(args.workdir).resolve().parent / "recon_baselines_cache_v2.npz"
+        ae = cfg.autoencoder
+        cache = (pathlib.Path(args.workdir).resolve().parent
+                 / f"recon_baselines_cache_v2_d{ae.latent_dim}_r{ae.time_reduction}_{cfg.fps:g}.npz")
         if cache.is_file():
             z = dict(np.load(cache))
         else:
@@ -146,6 +149,12 @@ def main(argv) -> int:
         for k, v in per_joint.items()}
     report["ae_first_frame_deg"] = float(np.mean(first))
     report["ae_interior_deg"] = float(np.mean(interior))
+
+    if args.angles_only:
+        with open(args.out, "w") as f:
+            json.dump(report, f, indent=1)
+        print(json.dumps({k: v["mean"] for k, v in report["angle_deg"].items()}, indent=1))
+        return 0
 
     # ---- 2. round trips as motions at the clip rate (written like `jaxgest tgst transfer` writes a result)
     from jaxgest.motion import kinematics

@@ -6,7 +6,8 @@ Reads RESULTS_DIR/diagnose_{PREFIX}{MODE}_s{SEED}.json (diagnose.py, PREFIX defa
 markdown report: mean angle per joint (AE per mode averaged over seeds, baselines), the per-seed means, and
 paired differences of the per-clip mean angles (clip = unit; mean +- standard error over clips, and the
 number of clips where the first is lower), for every pair of modes and for each mode against PCA-16 (fitted
-on the original training clips) and the mean pose.
+on the original training clips) and the mean pose; a run of another latent width also against the PCA of its
+width (``pca_<mode>``).
 """
 import itertools
 import json
@@ -40,6 +41,12 @@ def main(out, res, modes, seeds, prefix="mir_"):
         pj = np.asarray(first["angle_deg"][k]["per_clip_joint"])
         rows[label] = pj.mean(0)
         per_clip[k] = pj.mean(1)
+    for m, by_seed in runs.items():  # a run with another latent width has its own PCA (same width)
+        r = next(iter(by_seed.values()))
+        if r["angle_deg"]["pca16"]["per_clip"] != first["angle_deg"]["pca16"]["per_clip"]:
+            pj = np.asarray(r["angle_deg"]["pca16"]["per_clip_joint"])
+            rows[f"PCA of the latent width of {m} (original clips)"] = pj.mean(0)
+            per_clip[f"pca_{m}"] = pj.mean(1)
     lines = [f"Held-out clips: {len(clips)}; mean geodesic angle (deg) per joint over frames, then clips.", "",
              "| model | " + " | ".join(joints) + " | mean |", "|---" * (len(joints) + 2) + "|"]
     for name, v in rows.items():
@@ -53,8 +60,9 @@ def main(out, res, modes, seeds, prefix="mir_"):
     for a, b in itertools.combinations(list(runs), 2):
         lines.append(f"| AE {a} - AE {b} | " + paired(per_clip[a], per_clip[b]).replace(" | ", " | ") + " |")
     for a in runs:
-        for b in ("pca16", "pca16_mix", "mean_pose"):
-            lines.append(f"| AE {a} - {b} | " + paired(per_clip[a], per_clip[b]) + " |")
+        for b in ("pca16", "pca16_mix", "mean_pose", f"pca_{a}"):
+            if b in per_clip:
+                lines.append(f"| AE {a} - {b} | " + paired(per_clip[a], per_clip[b]) + " |")
     text = "\n".join(lines) + "\n"
     pathlib.Path(out).write_text(text)
     print(text)

@@ -73,6 +73,102 @@ def test_mirror_twice_is_identity_and_positions_reflect(seed):
                                atol=1e-9)
 
 
+def _random_rotation(rng):
+    return R.quat_to_matrix(R.quat_normalize(rng.normal(size=4)))
+
+
+def turned_rig(rng):
+    """A left/right-symmetric rig whose joint frames are arbitrary: random T-pose frames for the central and
+    left joints, and right frames that are the reflected left ones times a random local reflection (the
+    Bandai-Namco case is ``-I``: its right arm frames are the left ones turned 180 deg about the bone).
+
+    Returns (skeleton, T-pose world rotations (J, 4), T-pose world positions (J, 3)); offsets are the T-pose
+    bones in the parents' T-pose frames, so the identity pose is NOT the T-pose.
+    """
+    names = ("Hips", "Spine", "Neck", "Head", "Shoulder_L", "Arm_L", "Hand_L", "Shoulder_R", "Arm_R", "Hand_R",
+             "Leg_L", "Foot_L", "Leg_R", "Foot_R")
+    parents = np.array([-1, 0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 0, 12])
+    S = np.diag([-1.0, 1.0, 1.0])
+    pos = np.array([[0, 90, 0], [0, 130, 0], [0, 150, 0], [0, 160, 0], [5, 145, 0], [18, 145, 0], [45, 145, 0],
+                    [-5, 145, 0], [-18, 145, 0], [-45, 145, 0], [10, 85, 0], [10, 45, 0], [-10, 85, 0],
+                    [-10, 45, 0]], dtype=np.float64)
+    T = np.empty((len(names), 3, 3))
+    for j, n in enumerate(names):
+        if not n.endswith("_R"):
+            T[j] = _random_rotation(rng)
+    for j, n in enumerate(names):
+        if n.endswith("_R"):
+            local = -_random_rotation(rng)  # any reflection of the local frame (det -1)
+            T[j] = S @ T[names.index(n[:-2] + "_L")] @ local
+    offsets = np.array([T[p].T @ (pos[j] - pos[p]) if p >= 0 else pos[j] for j, p in enumerate(parents)])
+    sk = Skeleton(names=names, parents=parents, offsets=offsets)
+    return sk, R.matrix_to_quat(T), pos
+
+
+def pose_from_world(sk, g, root):
+    """One-frame Motion with world rotations ``g`` (J, 4) and root position ``root``."""
+    local = g.copy()
+    for j, p in enumerate(sk.parents):
+        if p >= 0:
+            local[j] = R.quat_mul(R.quat_inv(g[p]), g[j])
+    trans = sk.offsets.copy()
+    trans[0] = root
+    return Motion(sk, local[None], trans[None], fps=30)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**31 - 1))
+def test_mirror_with_tpose_keeps_the_representation(seed):
+    """With the rig's T-pose, mirroring (a) reflects world positions exactly with L/R swapped and (b) maps a
+    symmetric pose onto itself, local rotations included, on a rig with arbitrary joint frames."""
+    rng = np.random.default_rng(seed)
+    sk, tpose, tpos = turned_rig(rng)
+    perm = K.mirror_pairs(sk)
+    # (a) any motion: positions reflected to rounding, twice = identity
+    m = random_motion(rng, sk)
+    mm = K.mirror(m, tpose=tpose)
+    reflected = K.forward_kinematics(m)[:, perm] * [-1, 1, 1]
+    np.testing.assert_allclose(K.forward_kinematics(mm), reflected, atol=1e-9)
+    back = K.mirror(mm, tpose=tpose)
+    assert R.quat_angle(R.quat_mul(R.quat_inv(back.rotations), m.rotations)).max() < 1e-9
+    np.testing.assert_allclose(back.translations, m.translations, atol=1e-9)
+    # (b) the T-pose and a random symmetric pose (each side turned by mirror-image world rotations, central
+    # joints about the left-right axis) are their own mirror images
+    S = np.diag([-1.0, 1.0, 1.0])
+    d = np.empty((sk.num_joints, 3, 3))
+    for j in range(sk.num_joints):
+        if perm[j] == j:
+            d[j] = R.quat_to_matrix(R.expmap_to_quat(np.array([rng.normal(), 0.0, 0.0])))
+        elif perm[j] > j:
+            d[j] = _random_rotation(rng)
+            d[perm[j]] = S @ d[j] @ S
+    tm = R.quat_to_matrix(tpose)
+    for g in (tpose, R.matrix_to_quat(d @ tm)):
+        sym = pose_from_world(sk, g, np.array([0.0, 90.0, 3.0]))
+        np.testing.assert_allclose(K.forward_kinematics(sym)[:, perm] * [-1, 1, 1], K.forward_kinematics(sym),
+                                   atol=1e-9)  # the pose is symmetric
+        assert R.quat_angle(R.quat_mul(R.quat_inv(K.mirror(sym, tpose=tpose).rotations), sym.rotations)).max() < 1e-9
+        # without the T-pose, positions stay right but the local rotations leave the representation
+        np.testing.assert_allclose(K.forward_kinematics(K.mirror(sym, keep_rig_offsets=False)),
+                                   K.forward_kinematics(sym), atol=1e-9)
+    assert R.quat_angle(R.quat_mul(R.quat_inv(K.mirror(sym).rotations), sym.rotations)).max() > 0.1
+
+
+def test_mirror_frames_without_tpose_inherit_the_parent_on_ties():
+    """A joint whose only child lies on an axis (Bandai-Namco's Neck -> Head along local X) cannot tell two
+    reflections apart from its offsets; it takes its parent's, so a straight neck stays straight."""
+    sk = Skeleton(names=("Hips", "Chest", "Neck", "Head", "Arm_L", "Arm_R"), parents=np.array([-1, 0, 1, 2, 1, 1]),
+                  offsets=np.array([[0, 90.0, 0], [10, 0, 0], [15, 0, 0], [6, 0, 0], [12, 0, 5], [12, 0, -5]]))
+    frames = K.mirror_frames(sk)
+    np.testing.assert_array_equal(np.diag(frames[1]), [1, 1, -1])  # arms at +-Z in the chest frame
+    np.testing.assert_array_equal(frames[2], frames[1])  # tie between Y and Z: the parent's Z
+    np.testing.assert_array_equal(frames[3], frames[2])
+    ident = np.zeros((1, 6, 4))
+    ident[..., 0] = 1.0
+    m = Motion(sk, ident, sk.offsets[None].copy(), fps=30)
+    assert R.quat_angle(K.mirror(m).rotations[0, 2]) < 1e-12  # the neck is not turned by 180 deg
+
+
 @settings(max_examples=25, deadline=None)
 @given(st.integers(0, 2**31 - 1))
 def test_yaw_removal_then_restore_is_identity(seed):
@@ -125,6 +221,42 @@ def test_real_files_mirror_and_yaw(bandai_dir, zeggs_dir):
     bn = bvh.load(sorted(bandai_dir.glob("*.bvh"))[0])
     # Bandai-Namco's rig is symmetric to 0.05 cm: mirrored local translations stay at the rest offsets.
     assert np.abs(K.mirror(bn).translations[:, 2:] - bn.skeleton.offsets[2:]).max() < 0.05
+
+
+def _chordal_mean(q):
+    u, _, vt = np.linalg.svd(R.quat_to_matrix(q).mean(0))
+    return R.matrix_to_quat(u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt)
+
+
+@pytest.mark.realdata
+def test_real_mirror_in_the_originals_representation(bandai_dir, zeggs_dir):
+    """The TGST data pipeline's mirror (rig T-pose as the symmetric reference): (a) world positions reflected
+    with L/R swapped to 1e-6 cm, (b) per joint, the mean local rotation of the mirrored clip lies within a
+    few degrees of the original's (the offsets-only mirror puts the shoulders 180 deg away); on ZEGGS
+    (rest pose = T-pose) it is the offsets-only mirror."""
+    from jaxgest.motion import body
+    from jaxgest.tgst.data import mirror_motion
+
+    m = bvh.load(bandai_dir / "dataset-1_walk_normal_001.bvh")  # a nearly symmetric motion
+    mm = mirror_motion(m)
+    reflected = K.forward_kinematics(m)[:, K.mirror_pairs(m.skeleton)] * [-1, 1, 1]
+    np.testing.assert_allclose(K.forward_kinematics(mm), reflected, atol=1e-6)
+    gap = {}
+    for name in body.BODY:
+        j = m.skeleton.index(name)
+        a, b = _chordal_mean(m.rotations[:, j]), _chordal_mean(mm.rotations[:, j])
+        gap[name] = float(np.degrees(R.quat_angle(R.quat_mul(R.quat_inv(a), b))))
+    old = K.mirror(m)  # offsets-only: same positions, the shoulders' frames turned by 180 deg
+    j = m.skeleton.index("Shoulder_L")
+    old_gap = np.degrees(R.quat_angle(R.quat_mul(R.quat_inv(_chordal_mean(m.rotations[:, j])),
+                                                 _chordal_mean(old.rotations[:, j]))))
+    assert old_gap > 90, old_gap
+    assert max(gap[n] for n in ("Hips", "Spine", "Chest", "Neck", "Head")) < 10.0, gap  # 1-8 deg
+    assert max(gap[n] for n in body.ARMS) < 10.0, gap  # 3.5-6 deg
+    assert max(gap.values()) < 20.0, gap  # feet 14 deg
+    z = bvh.load(zeggs_dir / "067_Speech_2_x_1_0.bvh")
+    z = z.replace(rotations=z.rotations[:60], translations=z.translations[:60])
+    np.testing.assert_allclose(mirror_motion(z).rotations, K.mirror(z).rotations, atol=1e-12)
 
 
 def test_fk_chain_with_root_rotation_and_translation_channels():

@@ -1,13 +1,14 @@
 """Autoencoder and swap diagnostics on the held-out clips: what the model does before any style is involved.
 
     python experiments/tgst_bandai/diagnose.py WORKDIR EVAL_DIR OUT.json [TRAIN_DIR] [--ae-step N] [--no-swap]
-        [--edge-frames N]
+        [--edge-frames N] [--angles-only]
 
 1. Reconstruction against baselines with the same inputs (upper body, 13 joints, model rate, geodesic
    angle per joint, degrees): the autoencoder round trip (jaxgest.tgst.model.reconstruct: the clip-end
    handling of every encode path), PCA-16 (16 numbers per 4 frames, the autoencoder's latent budget, fitted
-   on TRAIN_DIR's original and mirrored clips) and the mean pose (constant predictor, same data). Per joint
-   and overall; also the first frame against the interior (frames 16 .. F-17) for the autoencoder.
+   on TRAIN_DIR's original clips, and as ``pca16_mix`` on the original + mirrored clips) and the mean pose
+   (constant predictor, same data). Per joint, per clip and overall; also the first frame against the
+   interior (frames 16 .. F-17) for the autoencoder.
 2. Round trips as motions: each held-out clip x is re-encoded and decoded (upper and lower body), written on
    x's skeleton as `jaxgest tgst transfer --method autoencoder` does (TGSTModel.to_motion), and compared
    with x: mean arm-joint speed ratio (world positions, forward differences, 8 arm joints) overall and on
@@ -76,6 +77,7 @@ def main(argv) -> int:
     ap.add_argument("train_dir", nargs="?")
     ap.add_argument("--ae-step", type=int, default=None)
     ap.add_argument("--no-swap", action="store_true")
+    ap.add_argument("--angles-only", action="store_true", help="section 1 only (no round trips, no swap)")
     ap.add_argument("--edge-frames", type=int, default=None,
                     help="override the config's edge padding (0 = the old end-only padding, for comparison)")
     args = ap.parse_args(argv[1:])
@@ -110,31 +112,50 @@ def main(argv) -> int:
     if args.train_dir:
         import pathlib
 
-        cache = pathlib.Path(args.workdir).resolve().parent / "recon_baselines_cache.npz"  # same TRAIN_DIR
+        # fitted once per TRAIN_DIR (cache beside the workdirs): PCA-16 and mean pose on the original clips, and
+        # PCA-16 / mean pose on the original + mirrored clips (the mirror of the data pipeline)
+        ae = cfg.autoencoder
+        cache = (pathlib.Path(args.workdir).resolve().parent
+                 / f"recon_baselines_cache_v2_d{ae.latent_dim}_r{ae.time_reduction}_{cfg.fps:g}.npz")
         if cache.is_file():
-            z = np.load(cache)
-            pca = {"mean": z["pca_mean"], "basis": z["pca_basis"], "frames": int(z["pca_frames"])}
-            mean_pose = z["mean_pose"]
+            z = dict(np.load(cache))
         else:
-            from jaxgest.motion import kinematics
+            from jaxgest.tgst.data import mirror_motion
 
             train_clips = datasets.load_folder(args.train_dir, progress=False)
-            train_up = [body_upper_lower(c.motion, cfg.fps)[0] for c in train_clips]
-            train_up += [body_upper_lower(kinematics.mirror(c.motion), cfg.fps)[0] for c in train_clips]
-            pca = baselines.block_pca_fit(train_up, components=cfg.autoencoder.latent_dim,
-                                          frames=cfg.autoencoder.time_reduction)
-            mean_pose = baselines.mean_pose_fit(train_up)
-            np.savez(cache, pca_mean=pca["mean"], pca_basis=pca["basis"], pca_frames=pca["frames"],
-                     mean_pose=mean_pose)
-        per_joint["pca16"] = [baselines.per_joint_angle_deg(baselines.block_pca_reconstruct(pca, up), up)
-                              for up, _ in held]
-        per_joint["mean_pose"] = [baselines.per_joint_angle_deg(mean_pose, up) for up, _ in held]
+            orig = [body_upper_lower(c.motion, cfg.fps)[0] for c in train_clips]
+            mirr = [body_upper_lower(mirror_motion(c.motion), cfg.fps)[0] for c in train_clips]
+            z = {}
+            for tag, data in (("", orig), ("_mix", orig + mirr)):
+                pca = baselines.block_pca_fit(data, components=cfg.autoencoder.latent_dim,
+                                              frames=cfg.autoencoder.time_reduction)
+                z.update({f"pca_mean{tag}": pca["mean"], f"pca_basis{tag}": pca["basis"],
+                          f"pca_frames{tag}": pca["frames"], f"mean_pose{tag}": baselines.mean_pose_fit(data)})
+            np.savez(cache, **z)
+        for tag, label in (("", "original clips"), ("_mix", "original + mirrored clips")):
+            pca = {"mean": z[f"pca_mean{tag}"], "basis": z[f"pca_basis{tag}"], "frames": int(z[f"pca_frames{tag}"])}
+            per_joint[f"pca16{tag}"] = [baselines.per_joint_angle_deg(baselines.block_pca_reconstruct(pca, up), up)
+                                        for up, _ in held]
+            per_joint[f"mean_pose{tag}"] = [baselines.per_joint_angle_deg(z[f"mean_pose{tag}"], up)
+                                            for up, _ in held]
+        report["baselines_fitted_on"] = {"pca16": "original training clips", "mean_pose": "original training clips",
+                                         "pca16_mix": "original + mirrored (tgst.data.mirror_motion)",
+                                         "mean_pose_mix": "original + mirrored (tgst.data.mirror_motion)"}
     joints = list(body.UPPER)
+    report["clips"] = [c.path.name for c in clips]
     report["angle_deg"] = {
-        k: {"mean": float(np.mean(v)), "per_joint": dict(zip(joints, np.mean(v, axis=0).round(3).tolist()))}
+        k: {"mean": float(np.mean(v)), "per_joint": dict(zip(joints, np.mean(v, axis=0).round(3).tolist())),
+            "per_clip": np.mean(v, axis=1).round(4).tolist(),
+            "per_clip_joint": np.round(v, 3).tolist()}
         for k, v in per_joint.items()}
     report["ae_first_frame_deg"] = float(np.mean(first))
     report["ae_interior_deg"] = float(np.mean(interior))
+
+    if args.angles_only:
+        with open(args.out, "w") as f:
+            json.dump(report, f, indent=1)
+        print(json.dumps({k: v["mean"] for k, v in report["angle_deg"].items()}, indent=1))
+        return 0
 
     # ---- 2. round trips as motions at the clip rate (written like `jaxgest tgst transfer` writes a result)
     from jaxgest.motion import kinematics

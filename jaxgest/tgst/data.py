@@ -69,6 +69,43 @@ def motion_to_arrays(motion: Motion, fps: float) -> tuple[np.ndarray, np.ndarray
     return bc.upper.astype(np.float32), bc.lower.astype(np.float32)
 
 
+def rig_tpose(skeleton) -> np.ndarray:
+    """World rotations ``(J, 4)`` of a mapped rig's joints in its T-pose (the mirror's symmetric reference).
+
+    Bandai-Namco layout (a map with ``tpose_axes``): the body joints' T-pose axes by name, other joints
+    (the static ``joint_Root`` wrapper) their parent's (the root: identity). Maps with a rest T-pose
+    (ZEGGS): the rig's rest pose (:func:`jaxgest.motion.body.tpose_globals`).
+    """
+    name = body.detect_map(skeleton)
+    jm = body.load_map(name)
+    if "tpose_axes" not in jm:
+        return np.asarray(body.tpose_globals(name, skeleton), np.float64)
+    g, bsk = body.tpose_globals(name), body.body_skeleton()
+    to_body = {rig: b for b, rig in jm["joints"].items()}
+    out = np.zeros((skeleton.num_joints, 4))
+    done = np.zeros(skeleton.num_joints, bool)
+    while not done.all():  # parents first, whatever the joint order
+        for j in np.flatnonzero(~done):
+            p = int(skeleton.parents[j])
+            if p >= 0 and not done[p]:
+                continue
+            b = to_body.get(skeleton.names[j])
+            out[j] = g[bsk.index(b)] if b is not None else (out[p] if p >= 0 else (1.0, 0.0, 0.0, 0.0))
+            done[j] = True
+    return out
+
+
+def mirror_motion(motion: Motion) -> Motion:
+    """``motion`` mirrored about the sagittal plane in the representation of the originals.
+
+    :func:`jaxgest.motion.kinematics.mirror` with the rig's T-pose (:func:`rig_tpose`) as the symmetric
+    reference: world positions are the reflected originals' (L/R swapped), and the mirrored local rotations
+    are distributed like the originals' (the T-pose mirrors onto itself). Without the T-pose the Bandai-Namco
+    shoulders, arms and legs of a mirrored clip would sit ~180 deg from any original's.
+    """
+    return kinematics.mirror(motion, tpose=rig_tpose(motion.skeleton))
+
+
 def prepare_clips(clips: Sequence, cfg: Config) -> BodyData:
     """Dataset clips (``Clip`` or ``Motion``) -> :class:`BodyData` at ``cfg.model.fps`` with mirrored copies."""
     if not len(clips):
@@ -79,7 +116,7 @@ def prepare_clips(clips: Sequence, cfg: Config) -> BodyData:
         name = str(c.path) if isinstance(c, datasets.Clip) else (motion.name or f"clip {i}")
         contents.append(c.content if isinstance(c, datasets.Clip) else name)
         u, l = motion_to_arrays(motion, cfg.model.fps)
-        mu, ml = motion_to_arrays(kinematics.mirror(motion), cfg.model.fps)
+        mu, ml = motion_to_arrays(mirror_motion(motion), cfg.model.fps)
         up.append(u), lo.append(l), mup.append(mu), mlo.append(ml), names.append(name)
     return BodyData(up, lo, mup, mlo, names, float(cfg.model.fps), contents)
 

@@ -1,8 +1,10 @@
 """Subprocess worker of tests/test_parallel.py: train registered models data-parallel on N devices.
 
-Run as ``python tests/_parallel_worker.py --devices N --steps K --batch B --seed S --out DIR [--model M ...]``
-in a process whose ``XLA_FLAGS`` holds ``--xla_force_host_platform_device_count=4`` (set by the parent
-before this interpreter imports jax; ``--host-devices`` sets it here otherwise). For every model it runs
+tests/test_parallel.py calls ``main(["--devices", N, ...])`` in its own process (4 fake CPU devices, set by
+tests/conftest.py) and runs it as a subprocess for the multi-process case:
+``python tests/_parallel_worker.py --devices N --steps K --batch B --seed S --out DIR [--model M ...]`` in a
+process whose ``XLA_FLAGS`` holds ``--xla_force_host_platform_device_count=N`` (set by the parent before this
+interpreter imports jax; ``--host-devices`` sets it here otherwise). For every model it runs
 ``K`` steps of :func:`jaxgest.training.train_loop` through :mod:`jaxgest.parallel` and writes
 
 * ``DIR/<model>.npz``: the final parameters, keyed by their pytree path (``<model>_init.npz``: initial);

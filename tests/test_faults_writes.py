@@ -20,6 +20,8 @@ from jaxgest.errors import WriteError
 from jaxgest.motion import bvh
 from jaxgest.training import Checkpointer, MetricsLogger, train_loop
 
+from faults_testing import NOISE, copy, infer, kill_when, run, snapshot, toy_problem
+
 
 def _failing_json_save(monkeypatch, err=errno.ENOSPC):
     """orbax's meta item write fails as on a full disk (or read-only folder) after the arrays were written."""
@@ -174,8 +176,6 @@ def test_sigkill_during_an_output_write(tiny, capsys, tmp_path):
     code = f"""
 import pathlib, time
 from jaxgest.io import atomic_output
-
-from faults_testing import NOISE, copy, infer, kill_when, run, snapshot, toy_problem
 with atomic_output({str(out)!r}) as tmp:
     with open(tmp, "w") as f:
         f.write("HIERARCHY\\nROOT Hips\\n")  # the first part of a file

@@ -62,8 +62,39 @@ def _worker_args(out: pathlib.Path) -> list:
     return ["--steps", str(STEPS), "--batch", str(BATCH), "--seed", str(SEED), "--out", str(out)]
 
 
+def _start_hosts(root: pathlib.Path) -> list:
+    """Start the 2 worker processes (2 devices each) joined by jax.distributed; returns (process, log) pairs."""
+    port = _free_port()
+    cmd = ([sys.executable, str(WORKER), "--host-local"] + _worker_args(root / "hosts")
+           + [a for m in HOST_MODELS for a in ("--model", m)])
+    # Output to files, not pipes: a worker blocked on a full pipe that is not read yet would stall its
+    # jax.distributed peer (which then fails the shutdown barrier).
+    logs = [open(root / f"host{p}.log", "w+") for p in range(2)]
+    return [(subprocess.Popen(cmd, env=_host_env(2, JAX_COORDINATOR_ADDRESS=f"localhost:{port}",
+                                                 JAX_NUM_PROCESSES="2", JAX_PROCESS_ID=str(p)),
+                              stdout=logs[p], stderr=subprocess.STDOUT, text=True), logs[p]) for p in range(2)]
+
+
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def hosts_started(request, tmp_path_factory):
+    """The 2-process run, started before the in-process runs when a selected test needs it (it is mostly
+    compile time, so it overlaps with theirs); None otherwise."""
+    if not any(item.path == request.path and "host_runs" in getattr(item, "fixturenames", ())
+               for item in request.session.items):
+        yield None
+        return
+    root = tmp_path_factory.mktemp("parallel_hosts")
+    procs = _start_hosts(root)
+    yield root, procs
+    for proc, log_file in procs:  # only left running when the module ended early
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        log_file.close()
+
+
+@pytest.fixture(scope="module")
+def runs(hosts_started, tmp_path_factory):
     """The worker in this process on 1 device and on 4 devices; returns the output folders."""
     assert jax.device_count() == 4, "tests/conftest.py configures 4 fake CPU devices"
     root = tmp_path_factory.mktemp("parallel")
@@ -73,28 +104,20 @@ def runs(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def host_runs(tmp_path_factory):
+def host_runs(hosts_started):
     """The true multi-process run: 2 worker processes x 2 devices joined by jax.distributed."""
-    root = tmp_path_factory.mktemp("parallel_hosts")
-    port = _free_port()
-    cmd = ([sys.executable, str(WORKER), "--host-local"] + _worker_args(root / "hosts")
-           + [a for m in HOST_MODELS for a in ("--model", m)])
-    # Output to files, not pipes: a worker blocked on a full pipe that is not read yet would stall its
-    # jax.distributed peer (which then fails the shutdown barrier).
-    logs = [open(root / f"host{p}.log", "w+") for p in range(2)]
-    procs = [subprocess.Popen(cmd, env=_host_env(2, JAX_COORDINATOR_ADDRESS=f"localhost:{port}",
-                                                 JAX_NUM_PROCESSES="2", JAX_PROCESS_ID=str(p)),
-                              stdout=logs[p], stderr=subprocess.STDOUT, text=True) for p in range(2)]
+    assert hosts_started is not None
+    root, procs = hosts_started
     failed = []
-    for p, proc in enumerate(procs):
+    for p, (proc, log_file) in enumerate(procs):
         try:
             proc.wait(timeout=1200)  # generous: 2 shared cores, cold compilation
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-        logs[p].seek(0)
-        log = logs[p].read()
-        logs[p].close()
+        log_file.seek(0)
+        log = log_file.read()
+        log_file.close()
         if proc.returncode != 0:
             failed.append(f"host{p}: exit {proc.returncode}\n{log[-3000:]}")
     if failed:

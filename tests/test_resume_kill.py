@@ -40,6 +40,7 @@ import pytest
 from jaxgest.errors import TrainingError
 from jaxgest.training import Checkpointer, MetricsLogger, TrainState, train_loop
 
+from conftest import NUM_DEVICES
 from faults_testing import assert_identical, params_at
 from tiny_models import CKPT_EVERY, TGST_STEPS, TINY_SEED, ZEGGS_STEPS
 
@@ -53,7 +54,10 @@ def env(tmp_path_factory):
     e = {k: v for k, v in os.environ.items() if not k.startswith(("XLA_", "JAX_PLATFORMS"))}
     e.setdefault("JAX_COMPILATION_CACHE_DIR", str(tmp_path_factory.mktemp("xla_cache")))
     e.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
-    e.update(JAX_PLATFORMS="cpu", PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+    # the same CPU client as the test process (its device count changes how XLA splits the work, and with it
+    # the last bits of the sums): the runs are compared bit for bit with the session's in-process workdirs
+    e.update(JAX_PLATFORMS="cpu", JAX_NUM_CPU_DEVICES=str(NUM_DEVICES), PYTHONPATH=str(REPO),
+             PYTHONUNBUFFERED="1")
     return e
 
 

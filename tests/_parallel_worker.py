@@ -1,8 +1,10 @@
 """Subprocess worker of tests/test_parallel.py: train registered models data-parallel on N devices.
 
-Run as ``python tests/_parallel_worker.py --devices N --steps K --batch B --seed S --out DIR [--model M ...]``
-in a process whose ``XLA_FLAGS`` holds ``--xla_force_host_platform_device_count=4`` (set by the parent
-before this interpreter imports jax; ``--host-devices`` sets it here otherwise). For every model it runs
+tests/test_parallel.py calls ``main(["--devices", N, ...])`` in its own process (4 fake CPU devices, set by
+tests/conftest.py) and runs it as a subprocess for the multi-process case:
+``python tests/_parallel_worker.py --devices N --steps K --batch B --seed S --out DIR [--model M ...]`` in a
+process whose ``XLA_FLAGS`` holds ``--xla_force_host_platform_device_count=N`` (set by the parent before this
+interpreter imports jax; ``--host-devices`` sets it here otherwise). For every model it runs
 ``K`` steps of :func:`jaxgest.training.train_loop` through :mod:`jaxgest.parallel` and writes
 
 * ``DIR/<model>.npz``: the final parameters, keyed by their pytree path (``<model>_init.npz``: initial);
@@ -72,7 +74,7 @@ def _init_state(module, tx, seed: int, example):
         params = module.init(key, example)["params"]
         return TrainState.create(apply_fn=module.apply, params=params, tx=tx)
 
-    return jax.jit(create)(jax.random.PRNGKey(seed))
+    return jax.jit(create)(jax.random.key(seed))
 
 
 def _global_norm(tree):
@@ -166,7 +168,7 @@ def _tgst_setup(batch_size: int):
 def _tgst_params(cfg, seed: int):
     from jaxgest.tgst.model import init_params
 
-    return jax.jit(init_params, static_argnames="cfg")(cfg=cfg.model, key=jax.random.PRNGKey(seed))
+    return jax.jit(init_params, static_argnames="cfg")(cfg=cfg.model, key=jax.random.key(seed))
 
 
 @register("tgst_ae")
@@ -219,7 +221,7 @@ def build_zeggs(seed: int, batch_size: int):
     cfg = cfg0.override(batch_size=batch_size)
     t = cfg.train
     tx = make_optimizer(cfg)
-    params = jax.jit(lambda k: init_params(cfg.model, k))(jax.random.PRNGKey(seed))
+    params = jax.jit(lambda k: init_params(cfg.model, k))(jax.random.key(seed))
     state = TrainState.create(apply_fn=None, params=params, tx=tx).replace(step=jnp.asarray(0, jnp.int32))
     stats = pose_stats(cfg.model, data.pose_stats.mean, data.pose_stats.std)
     train_step = make_train_step(cfg)
@@ -296,7 +298,7 @@ def run_model(name: str, args, out: pathlib.Path) -> dict:
         for x, y in zip(jax.tree_util.tree_leaves(first), jax.tree_util.tree_leaves(other))
         for a, b in zip(sorted(x.addressable_shards, key=lambda s: s.device.id),
                         sorted(y.addressable_shards, key=lambda s: s.device.id)))
-    key = jax.random.PRNGKey(args.seed)
+    key = jax.random.key(args.seed)
     # Compile once, ahead of time, and train with that executable (same program as calling ``step``).
     compiled = step.lower(state, first, key).compile()
     hlo = compiled.as_text()

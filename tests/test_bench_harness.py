@@ -218,7 +218,7 @@ def test_numpy_reference_matches_the_jax_transfer():
     from jaxgest.tgst.model import init_params, transfer_arrays
 
     cfg = get_config("paper").model
-    params = jax.jit(lambda k: init_params(cfg, k))(jax.random.PRNGKey(1))
+    params = jax.jit(lambda k: init_params(cfg, k))(jax.random.key(1))
     rng = np.random.default_rng(0)
     c = rng.normal(scale=0.4, size=(2, 100, 39)).astype(np.float32)
     s = rng.normal(scale=0.4, size=(2, 70, 39)).astype(np.float32)
@@ -246,7 +246,7 @@ def test_zeggs_random_params_have_the_init_shapes(zeggs_tiny):
     from jaxgest.zeggs.model import init_params
 
     cfg, params, _, _ = zeggs_tiny
-    shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
+    shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.key(0))
     assert jax.tree_util.tree_structure(params) == jax.tree_util.tree_structure(shapes)
     assert all(a.shape == b.shape and a.dtype == b.dtype
                for a, b in zip(jax.tree_util.tree_leaves(params), jax.tree_util.tree_leaves(shapes)))

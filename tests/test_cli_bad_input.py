@@ -1,9 +1,10 @@
 """Bad input through the command line: exit status 2, ONE line on stderr naming the file and the problem.
 
-Every case runs ``jaxgest.cli.main([...])`` in-process on tiny trained models (TGST 2+2 steps, ZeroEGGS 2
-steps on the synthetic data) and checks: status 2; stderr is exactly one line (the CLI drops progress bars
-when stderr is not a terminal) starting with ``jaxgest: ``, naming the file (or the argument) and the
-problem, with no traceback; and the output folder holds no new file (no partial or temporary output).
+Every case runs ``jaxgest.cli.main([...])`` in-process on the session's tiny trained models (conftest:
+TGST 4+4 steps, ZeroEGGS 4 steps on the synthetic data; a case that changes a workdir copies it) and
+checks: status 2; stderr is exactly one line (the CLI drops progress bars when stderr is not a terminal)
+starting with ``jaxgest: ``, naming the file (or the argument) and the problem, with no traceback; and the
+output folder holds no new file (no partial or temporary output).
 
 Documented behaviours checked here as successes: silent speech generates (finite features, SPEC §4), audio
 at any sample rate or channel count is resampled, and audio/motion lengths of a training clip may differ by
@@ -23,25 +24,14 @@ import soundfile as sf
 
 from jaxgest import cli
 from jaxgest.motion import bvh
-from jaxgest.motion.synthetic import write_dataset
 
 
 @pytest.fixture(scope="module")
-def ctx(tmp_path_factory):
-    """Synthetic data, trained TGST/ZeroEGGS workdirs (one with a PCA), and a folder of bad files."""
-    from jaxgest.tgst.train import train as tgst_train
-    from jaxgest.zeggs.train import train as zeggs_train
-
+def ctx(tiny, zeggs_pca_workdir, tmp_path_factory):
+    """The session's synthetic data and tiny TGST/ZeroEGGS workdirs (one with a PCA), and a folder of bad
+    files."""
     root = tmp_path_factory.mktemp("bad_input")
-    data = root / "data"
-    write_dataset(data, clips=4, seconds=3, progress=False)
-    tw, zw = root / "tgst", root / "zeggs"
-    tgst_train(data, tw, preset="tiny", ae_steps=2, transformer_steps=2, progress=False, log_every=1,
-               ckpt_every=2)
-    zeggs_train(data, zw, preset="tiny", steps=2, progress=False, log_every=1)
-    zp = root / "zeggs_pca"
-    shutil.copytree(zw, zp)
-    assert cli.main(["zeggs", "pca", "--workdir", str(zp), "--data", str(data), "--window", "1.0"]) == 0
+    data, tw, zw, zp = tiny["data"], tiny["tw"], tiny["zw"], zeggs_pca_workdir
 
     bad = root / "bad"
     bad.mkdir()
@@ -216,21 +206,33 @@ def test_training_audio_within_the_length_tolerance_trains(ctx, capsys, tmp_path
     assert rc == 0 and "data checked" in stdout and "no steps requested" in stdout
 
 
-def test_training_without_data_uses_the_builtin_synthetic_data(capsys, tmp_path):
-    work = tmp_path / "w"
-    rc, stdout = run_cli(["zeggs", "train", "--workdir", work, "--steps", "0"], capsys)
-    assert rc == 0 and f"built-in synthetic data in {work / 'synthetic-data'}" in stdout
-    assert len(list((work / "synthetic-data").glob("*.bvh"))) == 42 and (work / "synthetic-data/manifest.csv").is_file()
-    rc, stdout = run_cli(["zeggs", "train", "--workdir", work, "--steps", "0"], capsys)  # reused, not rewritten
-    assert rc == 0 and "no steps requested" in stdout
-    assert not list(work.glob(".synthetic-data.tmp-*"))  # written to a temporary folder, then renamed
-
-
-def test_tgst_training_without_data_uses_the_builtin_synthetic_data(capsys, tmp_path):
+def test_tgst_training_without_data_writes_the_builtin_synthetic_data_once(capsys, tmp_path):
+    """Without --data, training writes the built-in synthetic set (all 42 clips) into the workdir, through a
+    temporary folder renamed when complete, and a second run reuses it (the shared
+    ``synthetic.training_folder``; TGST reads the set faster than ZeroEGGS, whose wiring is checked below)."""
     work = tmp_path / "w"
     rc, stdout = run_cli(["tgst", "train", "--workdir", work, "--steps", "0"], capsys)
     assert rc == 0 and f"built-in synthetic data in {work / 'synthetic-data'}" in stdout, stdout
     assert "autoencoder no steps requested" in stdout
+    assert json.loads((work / "config.json").read_text())["data"] == str(work / "synthetic-data")
+    assert len(list((work / "synthetic-data").glob("*.bvh"))) == 42 and (work / "synthetic-data/manifest.csv").is_file()
+    assert not list(work.glob(".synthetic-data.tmp-*"))  # written to a temporary folder, then renamed
+    marker = work / "synthetic-data" / "manifest.csv"
+    stamp = marker.stat().st_mtime_ns
+    rc, stdout = run_cli(["tgst", "train", "--workdir", work, "--steps", "0"], capsys)  # reused, not rewritten
+    assert rc == 0 and "autoencoder no steps requested" in stdout
+    assert marker.stat().st_mtime_ns == stamp
+
+
+def test_zeggs_training_without_data_uses_the_builtin_synthetic_data(ctx, capsys, tmp_path):
+    """ZeroEGGS without --data trains on ``<workdir>/synthetic-data`` (here already present -- a small copy, so
+    the check does not build features for all 42 clips; writing it is checked with TGST above)."""
+    work = tmp_path / "w"
+    work.mkdir()
+    shutil.copytree(ctx["data"], work / "synthetic-data")
+    rc, stdout = run_cli(["zeggs", "train", "--workdir", work, "--steps", "0"], capsys)
+    assert rc == 0 and f"built-in synthetic data in {work / 'synthetic-data'}" in stdout, stdout
+    assert "no steps requested" in stdout
     assert json.loads((work / "config.json").read_text())["data"] == str(work / "synthetic-data")
 
 

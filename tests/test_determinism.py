@@ -1,6 +1,7 @@
 """Same seed, same machine -> bit-identical training losses, checkpoints and CLI outputs.
 
-Two trainings of each model with the same seed on the tiny synthetic data must write the same
+Two trainings of each model with the same seed on the tiny synthetic data (the session's shared workdir and
+a second run trained the same way, tests/tiny_models.py) must write the same
 ``metrics.jsonl`` losses (every field but the wall-clock ``steps_per_s``) and the same checkpointed
 parameters, bit for bit; ``tgst transfer`` and ``zeggs generate`` must write byte-identical BVH files from
 either workdir. A different seed must change them (so the comparison can fail). Batches are pure functions
@@ -18,16 +19,13 @@ import numpy as np
 import pytest
 
 from jaxgest import cli
-from jaxgest.motion.synthetic import write_dataset
 
-SEED = 7
+from tiny_models import TINY_SEED, train_tgst, train_zeggs
 
 
 @pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("determinism") / "data"
-    write_dataset(folder, clips=4, seconds=3, progress=False)
-    return folder
+def data(tiny_data):
+    return tiny_data
 
 
 def losses(workdir) -> list:
@@ -56,13 +54,12 @@ def run(argv, capsys) -> None:
 
 
 @pytest.fixture(scope="module")
-def tgst_runs(data, tmp_path_factory):
-    from jaxgest.tgst.train import train
-
+def tgst_runs(data, tgst_workdir, tmp_path_factory):
+    """``a``: the session's workdir; ``b``: trained the same way; ``other``: another seed."""
     root = tmp_path_factory.mktemp("tgst_det")
-    for name, seed in (("a", SEED), ("b", SEED), ("other", SEED + 1)):
-        train(data, root / name, preset="tiny", ae_steps=4, transformer_steps=4, seed=seed, progress=False,
-              log_every=1, ckpt_every=4)
+    (root / "a").symlink_to(tgst_workdir, target_is_directory=True)
+    for name, seed in (("b", TINY_SEED), ("other", TINY_SEED + 1)):
+        train_tgst(data, root / name, seed=seed)
     return root
 
 
@@ -89,19 +86,18 @@ def test_tgst_transfer_is_bit_identical(tgst_runs, data, tmp_path, capsys):
 
 
 @pytest.fixture(scope="module")
-def zeggs_runs(data, tmp_path_factory):
-    from jaxgest.zeggs.train import train
-
+def zeggs_runs(data, zeggs_workdir, tmp_path_factory):
+    """``a``: the session's workdir; ``b``: trained the same way."""
     root = tmp_path_factory.mktemp("zeggs_det")
-    for name in ("a", "b"):
-        train(data, root / name, preset="tiny", steps=3, seed=SEED, progress=False, log_every=1)
+    (root / "a").symlink_to(zeggs_workdir, target_is_directory=True)
+    train_zeggs(data, root / "b")
     return root
 
 
 @pytest.mark.slow
 def test_zeggs_training_is_bit_identical(zeggs_runs):
     a, b = zeggs_runs / "a", zeggs_runs / "b"
-    assert losses(a) == losses(b) and [r["step"] for r in losses(a)] == [1, 2, 3]
+    assert losses(a) == losses(b) and [r["step"] for r in losses(a)] == [1, 2, 3, 4]
     assert_same_arrays(restored(a / "checkpoints" / "zeggs"), restored(b / "checkpoints" / "zeggs"))
     for f in ("pose_stats.json", "speech_stats.json"):
         assert (a / f).read_bytes() == (b / f).read_bytes()

@@ -1,14 +1,13 @@
 """Data-parallel training (jaxgest.parallel): 4 devices train to the parameters of 1 device.
 
-The multi-device runs happen in subprocesses (tests/_parallel_worker.py) whose ``XLA_FLAGS`` give 4 fake
-CPU devices before jax is imported: one run on 1 device, one on 4 devices, and one on 2 processes x 2
-devices joined by ``jax.distributed`` (``JAX_COORDINATOR_ADDRESS`` on localhost), each host reading only
-its block of the batch. All start at once and are shared by the tests of this module (marked slow: the
-subprocesses take ~1-2 min of compile time together on 2 cores). Every model in the worker's registry is
-checked: two toys and the real ones (TGST autoencoder, TGST transformer, ZeroEGGS, tiny presets on the
-synthetic data); the 4-device run also calls the ``train`` entry points of both papers to check that
-config.json and metrics.jsonl record the device count. The in-process tests cover the single-device API
-and its errors.
+The test process has 4 fake CPU devices (tests/conftest.py, ``jax_num_cpu_devices``), so the worker of
+tests/_parallel_worker.py runs IN-PROCESS twice: on 1 device and on 4 devices (the 4-device run also calls
+the ``train`` entry points of both papers, to check that config.json and metrics.jsonl record the device
+count). Every model in the worker's registry is checked: two toys and the real ones (TGST autoencoder, TGST
+transformer, ZeroEGGS, tiny presets on the synthetic data). One true multi-process run remains (marked
+slow): 2 processes x 2 devices joined by ``jax.distributed`` (``JAX_COORDINATOR_ADDRESS`` on localhost),
+each host reading only its block of the batch, in subprocesses whose ``XLA_FLAGS`` give each 2 devices.
+The remaining in-process tests cover the mesh API and its errors.
 """
 
 from __future__ import annotations
@@ -39,7 +38,7 @@ worker = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(worker)
 MODELS = sorted(worker.BUILDERS)
 #: The 2-process run feeds the batch through the host-local path, which does not depend on the model: the
-#: toys and the TGST autoencoder cover it (the bigger models would double the compile time of this module).
+#: toys and the TGST autoencoder cover it (the in-process 4-device run covers every model).
 HOST_MODELS = ["tgst_ae", "toy_conv1d", "toy_mlp"]
 STEPS, BATCH, SEED = 4, 8, 3
 
@@ -50,54 +49,80 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _env(host_devices: int, cache: bool = True, **extra) -> dict:
-    # a persistent XLA cache the user set up is shared with the single-process workers (not with the
-    # jax.distributed ones: one process would write what the other reads while both are compiling)
-    keep = ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS") if cache else ()
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_")) or k in keep}
+def _host_env(host_devices: int, **extra) -> dict:
+    # no persistent XLA cache in the jax.distributed workers: one process would write what the other reads
+    # while both are compiling
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
     env.update(XLA_FLAGS=f"--xla_force_host_platform_device_count={host_devices}", JAX_PLATFORMS="cpu",
                PYTHONPATH=str(WORKER.parents[1]), **extra)
     return env
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    """Start every worker at once (they are mostly compile time) and wait; returns the output folders."""
-    root = tmp_path_factory.mktemp("parallel")
-    common = [sys.executable, str(WORKER), "--steps", str(STEPS), "--batch", str(BATCH), "--seed", str(SEED)]
+def _worker_args(out: pathlib.Path) -> list:
+    return ["--steps", str(STEPS), "--batch", str(BATCH), "--seed", str(SEED), "--out", str(out)]
+
+
+def _start_hosts(root: pathlib.Path) -> list:
+    """Start the 2 worker processes (2 devices each) joined by jax.distributed; returns (process, log) pairs."""
     port = _free_port()
-    jobs = {
-        "one": (common + ["--devices", "1", "--out", str(root / "one")], _env(4)),
-        "four": (common + ["--devices", "4", "--real-train", "--out", str(root / "four")], _env(4)),
-    }
-    for p in range(2):
-        jobs[f"host{p}"] = (
-            common + ["--host-local", "--out", str(root / "hosts")]
-            + [a for m in HOST_MODELS for a in ("--model", m)],
-            _env(2, cache=False, JAX_COORDINATOR_ADDRESS=f"localhost:{port}", JAX_NUM_PROCESSES="2",
-                 JAX_PROCESS_ID=str(p)),
-        )
+    cmd = ([sys.executable, str(WORKER), "--host-local"] + _worker_args(root / "hosts")
+           + [a for m in HOST_MODELS for a in ("--model", m)])
     # Output to files, not pipes: a worker blocked on a full pipe that is not read yet would stall its
     # jax.distributed peer (which then fails the shutdown barrier).
-    logs = {k: open(root / f"{k}.log", "w+") for k in jobs}
-    procs = {k: subprocess.Popen(cmd, env=env, stdout=logs[k], stderr=subprocess.STDOUT, text=True)
-             for k, (cmd, env) in jobs.items()}
+    logs = [open(root / f"host{p}.log", "w+") for p in range(2)]
+    return [(subprocess.Popen(cmd, env=_host_env(2, JAX_COORDINATOR_ADDRESS=f"localhost:{port}",
+                                                 JAX_NUM_PROCESSES="2", JAX_PROCESS_ID=str(p)),
+                              stdout=logs[p], stderr=subprocess.STDOUT, text=True), logs[p]) for p in range(2)]
+
+
+@pytest.fixture(scope="module")
+def hosts_started(request, tmp_path_factory):
+    """The 2-process run, started before the in-process runs when a selected test needs it (it is mostly
+    compile time, so it overlaps with theirs); None otherwise."""
+    if not any(item.path == request.path and "host_runs" in getattr(item, "fixturenames", ())
+               for item in request.session.items):
+        yield None
+        return
+    root = tmp_path_factory.mktemp("parallel_hosts")
+    procs = _start_hosts(root)
+    yield root, procs
+    for proc, log_file in procs:  # only left running when the module ended early
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        log_file.close()
+
+
+@pytest.fixture(scope="module")
+def runs(hosts_started, tmp_path_factory):
+    """The worker in this process on 1 device and on 4 devices; returns the output folders."""
+    assert jax.device_count() == 4, "tests/conftest.py configures 4 fake CPU devices"
+    root = tmp_path_factory.mktemp("parallel")
+    assert worker.main(["--devices", "1"] + _worker_args(root / "one")) == 0
+    assert worker.main(["--devices", "4", "--real-train"] + _worker_args(root / "four")) == 0
+    return {"one": root / "one", "four": root / "four"}
+
+
+@pytest.fixture(scope="module")
+def host_runs(hosts_started):
+    """The true multi-process run: 2 worker processes x 2 devices joined by jax.distributed."""
+    assert hosts_started is not None
+    root, procs = hosts_started
     failed = []
-    for k, proc in procs.items():
+    for p, (proc, log_file) in enumerate(procs):
         try:
             proc.wait(timeout=1200)  # generous: 2 shared cores, cold compilation
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-        logs[k].seek(0)
-        log = logs[k].read()
-        logs[k].close()
+        log_file.seek(0)
+        log = log_file.read()
+        log_file.close()
         if proc.returncode != 0:
-            failed.append(f"{k}: exit {proc.returncode}\n{log[-3000:]}")
+            failed.append(f"host{p}: exit {proc.returncode}\n{log[-3000:]}")
     if failed:
         pytest.fail("parallel worker failed:\n" + "\n".join(failed))
-    return {"one": root / "one", "four": root / "four", "host0": root / "hosts" / "proc0",
-            "host1": root / "hosts" / "proc1"}
+    return {f"host{p}": root / "hosts" / f"proc{p}" for p in range(2)}
 
 
 def _info(folder: pathlib.Path) -> dict:
@@ -142,15 +167,13 @@ def _assert_same_params(a: pathlib.Path, b: pathlib.Path, model: str = "", init:
             f"(largest movement {moved:.3g})")
 
 
-@pytest.mark.slow
 def test_every_registered_model_is_run(runs):
     assert MODELS and {"toy_mlp", "toy_conv1d", "tgst_ae", "tgst_transformer", "zeggs"} <= set(MODELS)
     assert set(HOST_MODELS) <= set(MODELS)
-    for name, run in runs.items():
-        assert sorted(_info(run)["models"]) == (HOST_MODELS if name.startswith("host") else MODELS)
+    for run in runs.values():
+        assert sorted(_info(run)["models"]) == MODELS
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("model", MODELS)
 def test_four_devices_train_like_one(runs, model):
     _assert_same_params(runs["one"] / f"{model}.npz", runs["four"] / f"{model}.npz", model,
@@ -164,7 +187,6 @@ def test_four_devices_train_like_one(runs, model):
     assert max(float(np.max(np.abs(trained[k] - start[k]))) for k in start.files) > 1e-3
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("model", MODELS)
 def test_batch_is_split_and_state_replicated(runs, model):
     info = _info(runs["four"])
@@ -185,7 +207,6 @@ def test_batch_is_split_and_state_replicated(runs, model):
     assert single["device_info"]["devices"] == 1 and not single["all_reduce_in_hlo"]
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("model", MODELS)
 def test_metrics_jsonl_records_device_count(runs, model):
     for run, devices in (("one", 1), ("four", 4)):
@@ -194,7 +215,6 @@ def test_metrics_jsonl_records_device_count(runs, model):
         assert all(r["devices"] == devices and r["processes"] == 1 for r in lines)
 
 
-@pytest.mark.slow
 def test_errors_name_the_problem(runs):
     errors = _info(runs["four"])["errors"]
     assert "batch array ['x'] has 6 examples, not divisible by the 4 devices" in errors["indivisible"]
@@ -206,13 +226,14 @@ def test_errors_name_the_problem(runs):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("model", HOST_MODELS)
-def test_two_hosts_train_like_one_device(runs, model):
+def test_two_hosts_train_like_one_device(runs, host_runs, model):
     for p in range(2):
-        info = _info(runs[f"host{p}"])
+        info = _info(host_runs[f"host{p}"])
+        assert sorted(info["models"]) == HOST_MODELS
         assert (info["process_index"], info["device_count"], info["local_device_count"]) == (p, 4, 2)
         m = info["models"][model]
         assert m["device_info"] == {"devices": 4, "platform": "cpu", "processes": 2}
-        _assert_same_params(runs["one"] / f"{model}.npz", runs[f"host{p}"] / f"{model}.npz", model,
+        _assert_same_params(runs["one"] / f"{model}.npz", host_runs[f"host{p}"] / f"{model}.npz", model,
                             runs["one"] / f"{model}_init.npz")
         # Host p holds only its contiguous block of the global batch.
         per = BATCH // 4
@@ -223,7 +244,6 @@ def test_two_hosts_train_like_one_device(runs, model):
         assert "a 2-process run uses all 4 devices" in info["errors"]["partial_mesh"]
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["tgst", "zeggs"])
 def test_train_entry_points_record_the_device_count(runs, kind):
     """``tgst.train.train`` / ``zeggs.train.train`` with devices=4: config.json and every metrics line say
@@ -257,9 +277,9 @@ def test_no_pmap_anywhere():
     assert "jit" in _python_names(root / "jaxgest" / "parallel.py")
 
 
-# ----- in-process (one CPU device) ------------------------------------------------------------------------
+# ----- the mesh API ----------------------------------------------------------------------------------------
 
-def test_make_mesh_and_device_info():
+def test_make_mesh_and_device_info(all_devices):
     mesh = parallel.make_mesh()
     assert mesh.axis_names == ("data",) and mesh.size == jax.device_count()
     assert parallel.device_info(parallel.make_mesh(1)) == {

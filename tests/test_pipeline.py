@@ -8,21 +8,12 @@ import soundfile as sf
 
 from jaxgest import cli
 from jaxgest.motion import bvh, kinematics
-from jaxgest.motion.synthetic import write_dataset
 
 
 @pytest.fixture(scope="module")
-def workdirs(tmp_path_factory):
-    from jaxgest.tgst.train import train as train_tgst
-    from jaxgest.zeggs.train import train as train_zeggs
-
-    root = tmp_path_factory.mktemp("pipeline")
-    data = root / "data"
-    write_dataset(data, clips=4, seconds=4, progress=False)  # same data/steps as test_zeggs_api: shared compiles
-    train_zeggs(data, root / "zeggs", preset="tiny", steps=6, progress=False, log_every=3, ckpt_every=3)
-    train_tgst(data, root / "tgst", preset="tiny", ae_steps=4, transformer_steps=4, progress=False, log_every=2,
-               ckpt_every=2)
-    return data, root / "zeggs", root / "tgst"
+def workdirs(tiny):
+    """The session's synthetic data and tiny ZeroEGGS / TGST workdirs (read-only)."""
+    return tiny["data"], tiny["zw"], tiny["tw"]
 
 
 def test_pipeline_api_output_on_style_rig_with_audio_length(workdirs, zeggs_dir):

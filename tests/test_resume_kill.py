@@ -1,11 +1,12 @@
 """Runs killed with SIGKILL resume from their last complete checkpoint and end like an uninterrupted run.
 
 Subprocesses run the real command line (``python -m jaxgest.cli tgst train`` / ``zeggs train``, the code
-behind the ``jaxgest`` script) on the tiny synthetic dataset. A run is killed once a complete checkpoint
+behind the ``jaxgest`` script) on the session's tiny synthetic dataset. A run is killed once a complete checkpoint
 exists (polling the checkpoint folder: orbax writes ``<step>.orbax-checkpoint-tmp-*`` and renames it to
 ``<step>`` when the save is complete), then restarted; the restored parameters of its final checkpoint
-must equal, bit for bit, those of an uninterrupted run with the same seed, and the metrics it logs after
-the restart must equal the uninterrupted run's lines. To make the kill independent of timing, the killed
+must equal, bit for bit, those of an uninterrupted run with the same seed -- the session's shared workdir
+(tests/tiny_models.py, trained in-process on one device; the subprocesses pass ``--devices 1`` and the same
+settings) -- and the metrics it logs after the restart must equal the uninterrupted run's lines. To make the kill independent of timing, the killed
 run is asked for far more steps than it can reach before the kill; the restart asks for the reference's
 step count (the requested step count is not part of the checkpoint check). The subprocesses share one
 persistent XLA compilation cache so only the first run of each model compiles.
@@ -37,10 +38,13 @@ import optax
 import pytest
 
 from jaxgest.errors import TrainingError
-from jaxgest.motion.synthetic import write_dataset
 from jaxgest.training import Checkpointer, MetricsLogger, TrainState, train_loop
 
-SEED = 5
+from conftest import NUM_DEVICES
+from faults_testing import assert_identical, params_at
+from tiny_models import CKPT_EVERY, TGST_STEPS, TINY_SEED, ZEGGS_STEPS
+
+SEED = TINY_SEED
 REPO = pathlib.Path(__file__).resolve().parents[1]
 TMP_MARK = "orbax-checkpoint-tmp"
 
@@ -50,15 +54,16 @@ def env(tmp_path_factory):
     e = {k: v for k, v in os.environ.items() if not k.startswith(("XLA_", "JAX_PLATFORMS"))}
     e.setdefault("JAX_COMPILATION_CACHE_DIR", str(tmp_path_factory.mktemp("xla_cache")))
     e.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
-    e.update(JAX_PLATFORMS="cpu", PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+    # the same CPU client as the test process (its device count changes how XLA splits the work, and with it
+    # the last bits of the sums): the runs are compared bit for bit with the session's in-process workdirs
+    e.update(JAX_PLATFORMS="cpu", JAX_NUM_CPU_DEVICES=str(NUM_DEVICES), PYTHONPATH=str(REPO),
+             PYTHONUNBUFFERED="1")
     return e
 
 
 @pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("resume") / "data"
-    write_dataset(folder, clips=4, seconds=3, progress=False)
-    return folder
+def data(tiny_data):
+    return tiny_data
 
 
 def _cmd(*args) -> list:
@@ -106,22 +111,6 @@ def kill_when(args, env, ready, timeout=600.0, poll=0.002):
     return proc
 
 
-def params_at(ckpt_dir: pathlib.Path, step: int) -> dict:
-    """``{path: array}`` of the parameters and optimizer state restored from one checkpoint."""
-    import orbax.checkpoint as ocp
-
-    tree = ocp.StandardCheckpointer().restore((ckpt_dir / str(step) / "state").resolve())
-    assert int(tree["step"]) == step
-    return {jax.tree_util.keystr(p): np.asarray(x) for p, x in
-            jax.tree_util.tree_flatten_with_path({"params": tree["params"], "opt": tree["opt_state"]})[0]}
-
-
-def assert_identical(a: dict, b: dict) -> None:
-    assert sorted(a) == sorted(b)
-    for k in a:
-        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
-
-
 def metrics(workdir: pathlib.Path) -> list:
     return [json.loads(x) for x in (workdir / "metrics.jsonl").read_text().splitlines()]
 
@@ -133,33 +122,33 @@ def _losses(lines, stage):
 
 # ----- TGST -------------------------------------------------------------------------------------------------
 
-TGST_AE, TGST_TR = 8, 16
+TGST_AE, TGST_TR = TGST_STEPS["ae_steps"], TGST_STEPS["transformer_steps"]
 
 
-def _tgst(data, work, ae, tr, ckpt_every=4, log_every=4):
+def _tgst(data, work, ae, tr, ckpt_every=CKPT_EVERY, log_every=1):
     return ["tgst", "train", "--data", data, "--workdir", work, "--preset", "tiny", "--seed", SEED,
-            "--ae-steps", ae, "--transformer-steps", tr, "--ckpt-every", ckpt_every, "--log-every", log_every]
+            "--ae-steps", ae, "--transformer-steps", tr, "--ckpt-every", ckpt_every, "--log-every", log_every,
+            "--devices", 1]
 
 
 @pytest.fixture(scope="module")
-def tgst_reference(data, env, tmp_path_factory):
-    work = tmp_path_factory.mktemp("tgst_ref") / "w"
-    _run(_tgst(data, work, TGST_AE, TGST_TR, log_every=1), env)
-    return work
+def tgst_reference(tgst_workdir):
+    """The uninterrupted run: the session's TGST workdir (same data, seed, steps and intervals)."""
+    return tgst_workdir
 
 
 @pytest.mark.slow
 def test_tgst_killed_in_transformer_stage_resumes_to_the_same_parameters(data, env, tgst_reference, tmp_path):
     work = tmp_path / "w"
     tr_dir = work / "checkpoints" / "transformer"
-    kill_when(_tgst(data, work, TGST_AE, 100_000, log_every=1), env, lambda: bool(complete_steps(tr_dir)))
+    kill_when(_tgst(data, work, TGST_AE, 100_000), env, lambda: bool(complete_steps(tr_dir)))
     killed_at = complete_steps(tr_dir)[-1]
-    assert 4 <= killed_at < TGST_TR, killed_at
+    assert CKPT_EVERY <= killed_at < TGST_TR, killed_at
     assert complete_steps(work / "checkpoints" / "autoencoder")[-1] == TGST_AE
     before = len(metrics(work))
 
-    r = _run(_tgst(data, work, TGST_AE, TGST_TR, log_every=1), env)
-    assert "autoencoder already at step 8, nothing to do" in r.stdout, r.stdout
+    r = _run(_tgst(data, work, TGST_AE, TGST_TR), env)
+    assert f"autoencoder already at step {TGST_AE}, nothing to do" in r.stdout, r.stdout
     new = metrics(work)[before:]
     assert [x["stage"] for x in new] == ["transformer"] * (TGST_TR - killed_at)
     assert new[0]["step"] == killed_at + 1  # resumed from the last complete checkpoint
@@ -173,15 +162,13 @@ def test_tgst_killed_in_transformer_stage_resumes_to_the_same_parameters(data, e
 
 @pytest.mark.slow
 def test_tgst_killed_during_a_save_resumes_from_the_previous_checkpoint(data, env, tgst_reference, tmp_path):
-    work = tmp_path / "w"
-    ae_dir = work / "checkpoints" / "autoencoder"
     caught = None
     for attempt in range(4):
         # Every step is saved; kill the moment a temporary checkpoint folder appears after a complete one.
-        before = complete_steps(ae_dir)[-1] if complete_steps(ae_dir) else 0
-        kill_when(_tgst(data, work, 100_000, 1, ckpt_every=1, log_every=1), env,
-                  lambda: bool(complete_steps(ae_dir) and complete_steps(ae_dir)[-1] > before
-                               and temporary_folders(ae_dir)))
+        work = tmp_path / f"w{attempt}"
+        ae_dir = work / "checkpoints" / "autoencoder"
+        kill_when(_tgst(data, work, 100_000, 1, ckpt_every=1), env,
+                  lambda: bool(complete_steps(ae_dir) and temporary_folders(ae_dir)))
         left = temporary_folders(ae_dir)
         if left:  # the kill interrupted a save: that step has no complete checkpoint
             caught = (left, complete_steps(ae_dir))
@@ -193,7 +180,7 @@ def test_tgst_killed_during_a_save_resumes_from_the_previous_checkpoint(data, en
     assert partial not in steps and steps[-1] == partial - 1, (left, steps)
     assert steps[-1] < TGST_AE
     r = _run(_tgst(data, work, TGST_AE, TGST_TR), env)
-    assert "autoencoder 8 steps loss" in r.stdout, r.stdout
+    assert f"autoencoder {TGST_AE} steps loss" in r.stdout, r.stdout
     assert not temporary_folders(ae_dir)  # orbax removed the incomplete save on restart
     for stage, step in (("autoencoder", TGST_AE), ("transformer", TGST_TR)):
         assert_identical(params_at(work / "checkpoints" / stage, step),
@@ -202,36 +189,32 @@ def test_tgst_killed_during_a_save_resumes_from_the_previous_checkpoint(data, en
 
 # ----- ZeroEGGS ---------------------------------------------------------------------------------------------
 
-#: ``zeggs train`` checkpoints every max(50, steps // 10) steps and at the end; it logs every 25 steps.
-ZEGGS_STEPS = 100
-
-
 def _zeggs(data, work, steps):
     return ["zeggs", "train", "--data", data, "--workdir", work, "--preset", "tiny", "--seed", SEED,
-            "--steps", steps]
+            "--steps", steps, "--ckpt-every", CKPT_EVERY, "--log-every", 1, "--devices", 1]
 
 
 @pytest.mark.slow
-def test_zeggs_killed_resumes_to_the_same_parameters(data, env, tmp_path):
-    ref = tmp_path / "ref"
-    _run(_zeggs(data, ref, ZEGGS_STEPS), env)
-    assert complete_steps(ref / "checkpoints" / "zeggs") == [50, 100]
+def test_zeggs_killed_resumes_to_the_same_parameters(data, env, zeggs_workdir, tmp_path):
+    ref = zeggs_workdir  # the uninterrupted run (same data, seed, steps and intervals)
+    assert complete_steps(ref / "checkpoints" / "zeggs") == [CKPT_EVERY, ZEGGS_STEPS]
 
     work = tmp_path / "w"
     ckpt = work / "checkpoints" / "zeggs"
-    # 500 steps: the checkpoint interval is still 50, and the run cannot end before it is killed.
+    # 500 steps: the run cannot end before it is killed at its first complete checkpoint.
     kill_when(_zeggs(data, work, 500), env, lambda: bool(complete_steps(ckpt)))
     killed_at = complete_steps(ckpt)[-1]
-    assert killed_at == 50, complete_steps(ckpt)
+    assert CKPT_EVERY <= killed_at < ZEGGS_STEPS, complete_steps(ckpt)
     before = len(metrics(work))
     stats = (work / "pose_stats.json").read_bytes(), (work / "speech_stats.json").read_bytes()
 
     r = _run(_zeggs(data, work, ZEGGS_STEPS), env)
-    assert "resumed from 50" in r.stdout, r.stdout
+    assert f"resumed from {killed_at}" in r.stdout, r.stdout
     assert ((work / "pose_stats.json").read_bytes(), (work / "speech_stats.json").read_bytes()) == stats
+    assert stats == ((ref / "pose_stats.json").read_bytes(), (ref / "speech_stats.json").read_bytes())
     new = metrics(work)[before:]
-    assert [x["step"] for x in new] == [75, 100]
-    assert _losses(new, "zeggs") == {s: v for s, v in _losses(metrics(ref), "zeggs").items() if s > 50}
+    assert [x["step"] for x in new] == list(range(killed_at + 1, ZEGGS_STEPS + 1))
+    assert _losses(new, "zeggs") == {s: v for s, v in _losses(metrics(ref), "zeggs").items() if s > killed_at}
     assert_identical(params_at(ckpt, ZEGGS_STEPS), params_at(ref / "checkpoints" / "zeggs", ZEGGS_STEPS))
 
 

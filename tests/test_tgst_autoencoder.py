@@ -1,0 +1,138 @@
+"""TGST motion autoencoder: upsampling, reconstruction loss, training step, clip-end padding, frozen
+standardisation statistics, and the autoencoder's training windows."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+
+from jaxgest.tgst import data as tdata
+from jaxgest.tgst import model as tmodel
+from jaxgest.tgst.autoencoder import expmap_reconstruction_loss, mean_angular_error_deg, upsample_linear
+from jaxgest.tgst.model import init_params
+from jaxgest.tgst.steps import create_ae_state, make_ae_train_step
+
+from tgst_testing import CFG, FULL, TINY, normal, random_like, random_params, smooth_motion
+
+
+@pytest.fixture(scope="module")
+def params():
+    return random_params()
+
+
+def test_upsample_matches_pytorch_linear_align_corners_false():
+    x = np.random.default_rng(0).normal(size=(1, 7, 3)).astype(np.float32)
+    src = np.clip((np.arange(14) + 0.5) / 2 - 0.5, 0, None)
+    i0 = np.floor(src).astype(int)
+    i1 = np.minimum(i0 + 1, 6)
+    lam = (src - i0)[None, :, None]
+    expected = (1 - lam) * x[:, i0] + lam * x[:, i1]
+    np.testing.assert_allclose(np.asarray(upsample_linear(jnp.asarray(x), 2)), expected, atol=1e-6)
+    resized = jax.image.resize(jnp.asarray(x), (1, 14, 3), method="linear")
+    np.testing.assert_allclose(np.asarray(resized), expected, atol=1e-6)
+
+
+def test_reconstruction_loss_and_angle():
+    target = normal(0, (2, 8, 6), 0.5)
+    np.testing.assert_array_equal(np.asarray(expmap_reconstruction_loss(target, target)), 0.0)
+    axis = np.array([0.0, 0.6, 0.8], np.float32)
+    rot = jnp.asarray(np.tile(axis * 0.3, (2, 8, 2)))
+    pred = rot + jnp.asarray(np.tile(axis * 0.1, (2, 8, 2)))  # same axis, 0.1 rad further
+    np.testing.assert_allclose(np.asarray(expmap_reconstruction_loss(pred, rot)), 0.1, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(mean_angular_error_deg(pred, rot)), np.degrees(0.1), rtol=1e-3)
+    full_turn = rot + jnp.asarray(np.tile(axis * 2 * np.pi, (2, 8, 2)))  # same rotation, other exp-map
+    assert float(mean_angular_error_deg(full_turn, rot).max()) < 0.05
+
+
+def test_ae_loss_decreases(params):
+    tx = optax.adam(3e-3)
+    state = create_ae_state(FULL, jax.tree_util.tree_map(jnp.copy, params["autoencoder"]), tx)  # donated
+    step = jax.jit(make_ae_train_step(FULL, tx), donate_argnums=(0,))
+    batch = {"upper": smooth_motion(10, 4, 64, 39), "lower": smooth_motion(11, 4, 64, 24)}
+    key = jax.random.key(0)
+    state, first = step(state, batch, key)
+    for _ in range(29):
+        state, metrics = step(state, batch, key)
+    assert set(metrics) == {"loss", "upper_loss", "lower_loss", "angle_deg"}
+    assert float(metrics["loss"]) < 0.8 * float(first["loss"])
+    assert float(metrics["angle_deg"]) < float(first["angle_deg"])
+    assert int(state.step) == 30
+
+
+def test_pad_clip_replicates_both_ends_and_trims_back():
+    x = smooth_motion(11, 2, 37, 39)
+    p = tmodel.pad_clip(x, cfg=CFG)
+    lead, total = tmodel.edge_layout(37, cfg=CFG)
+    assert lead == 16 and p.shape == (2, total, 39) and total % CFG.frame_multiple == 0
+    assert total - 37 - lead >= lead  # the end gets at least as many copies
+    np.testing.assert_array_equal(np.asarray(p[:, :lead]), np.broadcast_to(np.asarray(x[:, :1]), (2, lead, 39)))
+    np.testing.assert_array_equal(np.asarray(p[:, lead + 37:]),
+                                  np.broadcast_to(np.asarray(x[:, -1:]), (2, total - lead - 37, 39)))
+    np.testing.assert_array_equal(np.asarray(tmodel.trim_clip(p, 37, cfg=CFG)), np.asarray(x))
+    with pytest.raises(ValueError, match="edge_frames"):
+        dataclasses.replace(CFG, edge_frames=4)  # tokens would not start at the clip's first frame
+
+
+def test_constant_clip_reconstructs_constant_at_the_ends(params):
+    """With edge padding the encoder's zero padding never reaches a real frame: a held pose decodes to the
+    same pose on every frame, the first and last included (without it the first frames differ)."""
+    pose = normal(12, (1, 1, 39), 0.5)
+    x = jnp.broadcast_to(pose, (1, 48, 39))
+    rec = jax.jit(tmodel.reconstruct, static_argnames="cfg")
+    for cfg, constant in ((CFG, True), (dataclasses.replace(CFG, edge_frames=0), False)):
+        up, lo = rec(params["autoencoder"], x, cfg=cfg)
+        for y in (np.asarray(up[0]), np.asarray(lo[0])):
+            spread = np.abs(y - y[20]).max()
+            assert (spread < 1e-5) == constant, (cfg.edge_frames, spread)
+
+
+def test_standardized_autoencoder_statistics_are_frozen():
+    from jaxgest.tgst.losses import ae_loss_terms
+
+    cfg = dataclasses.replace(CFG, autoencoder=dataclasses.replace(CFG.autoencoder, standardize=True))
+    p = random_like(jax.eval_shape(lambda k: init_params(cfg, k), jax.random.key(0)))["autoencoder"]
+    stats = {"upper_mean": jnp.full((39,), 0.3), "upper_std": jnp.full((39,), 2.0),
+             "lower_mean": jnp.full((24,), -0.2), "lower_std": jnp.full((24,), 0.5)}
+    p = dict(p, **stats)
+    batch = {"upper": smooth_motion(17, 2, 32, 39), "lower": smooth_motion(18, 2, 32, 24)}
+    grads = jax.jit(jax.grad(lambda q: jnp.mean(ae_loss_terms(q, batch, cfg=cfg)["loss"])))(p)
+    tx = optax.adam(1e-2)
+    updates, _ = tx.update(grads, tx.init(p), p)
+    new = optax.apply_updates(p, updates)
+    for k, v in stats.items():  # no gradient reaches the statistics, so Adam leaves them exactly unchanged
+        np.testing.assert_array_equal(np.asarray(grads[k]), 0.0)
+        np.testing.assert_array_equal(np.asarray(new[k]), np.asarray(v))
+    assert np.abs(np.asarray(grads["encoder"]["conv_0"]["kernel"])).max() > 0
+    # the statistics are used: the output is mean + std * (decoder output)
+    rec = jax.jit(tmodel.reconstruct, static_argnames="cfg")
+    up, _ = rec(p, batch["upper"], cfg=cfg)
+    up0, _ = rec(dict(p, upper_mean=jnp.zeros(39)), batch["upper"], cfg=cfg)
+    assert not np.allclose(np.asarray(up), np.asarray(up0))
+
+
+def test_content_balanced_window_sampling():
+    lengths = np.array([400] * 9 + [100])  # nine long clips of content "walk", one short "wave"
+    groups = ["walk"] * 9 + ["wave"]
+    rng = np.random.default_rng(0)
+    idx = tdata.sample_windows_idx(lengths, 64, 4000, rng, [str(i) for i in range(10)], groups=groups)
+    share = np.mean([i == 9 for i, _ in idx])
+    assert 0.45 < share < 0.55  # uniform over windows would give 37 / (9 * 337 + 37) ~ 1 %
+    assert all(0 <= s <= lengths[i] - 64 for i, s in idx)
+
+
+def test_ae_batch_without_mirrored_clips():
+    up = [np.full((80, 39), float(i), np.float32) for i in range(3)]
+    lo = [np.zeros((80, 24), np.float32) for _ in range(3)]
+    mup = [np.full((80, 39), -1.0 - i, np.float32) for i in range(3)]  # mirrored copies: negative values
+    data = tdata.BodyData(up, lo, mup, lo, ["a", "b", "c"], 60.0, ["x", "x", "y"])
+    for mirror in (True, False):
+        ae = dataclasses.replace(TINY.train.autoencoder, mirror=mirror, batch_size=64, sampling="content")
+        cfg = dataclasses.replace(TINY, train=dataclasses.replace(TINY.train, autoencoder=ae))
+        b = tdata.ae_batch(data, cfg, 0, 0)["upper"]
+        assert b.shape == (64, ae.window, 39)
+        assert bool((b < 0).any()) == mirror

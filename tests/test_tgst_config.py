@@ -1,0 +1,128 @@
+"""TGST (paper 000) configs and sizes: parameter counts, layer shapes, presets, JSON round trip, overrides, and
+configs/checkpoints written before a field existed."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import jax
+import jax.numpy as jnp
+import pytest
+
+from jaxgest.tgst import api
+from jaxgest.tgst import data as tdata
+from jaxgest.tgst.autoencoder import MotionAutoencoder
+from jaxgest.tgst.config import Config, ModelConfig, preset
+from jaxgest.tgst.transformer import StyleTransformer
+
+from tgst_testing import TINY, param_count
+
+
+def test_param_counts_paper():
+    assert api.count_params("paper") == {"autoencoder": 23743, "transformer": 50240}
+
+
+@pytest.mark.parametrize("variant", ["paper", "authors"])
+@pytest.mark.parametrize("lns,expected", [(1, 50240), (2, 50496)])
+def test_transformer_param_count_layernorms(variant, lns, expected):
+    tcfg = dataclasses.replace(preset("paper").model.transformer, layernorms_per_block=lns, variant=variant)
+    tok = jnp.zeros((1, 5, 64))
+    shapes = jax.eval_shape(StyleTransformer(tcfg).init, jax.random.key(0), tok, tok)
+    assert param_count(shapes) == expected
+
+
+def test_autoencoder_layer_sizes_and_shapes():
+    ae = MotionAutoencoder(preset("paper").model.autoencoder)
+    shapes = jax.eval_shape(ae.init, jax.random.key(0), jnp.zeros((2, 64, 39)))["params"]
+    sizes = {part: [param_count(shapes[part][f"conv_{i}"]) for i in range(3)]
+             for part in ("encoder", "upper_decoder", "lower_decoder")}
+    assert sizes == {"encoder": [2560, 6176, 1552], "upper_decoder": [1568, 6208, 2535],
+                     "lower_decoder": [784, 1568, 792]}
+    variables = {"params": shapes}
+    z = jax.eval_shape(lambda v, x: ae.apply(v, x, method=MotionAutoencoder.encode), variables,
+                       jnp.zeros((2, 64, 39)))
+    assert z.shape == (2, 16, 16)
+    (up, lo), _ = jax.eval_shape(ae.apply, variables, jnp.zeros((2, 64, 39)))
+    assert up.shape == (2, 64, 39) and lo.shape == (2, 64, 24)
+
+
+def test_config_json_round_trip_and_validation():
+    from jaxgest.tgst.config import PRESETS
+    from jaxgest.tgst.train import DEFAULT_STEPS
+
+    assert set(PRESETS) == set(DEFAULT_STEPS)
+    for name in PRESETS:
+        cfg = preset(name)
+        assert Config.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
+        hash(cfg), hash(cfg.model)  # usable as jit static arguments
+    with pytest.raises(ValueError):
+        preset("huge")
+    with pytest.raises(ValueError, match="block_size"):
+        ModelConfig(transformer=dataclasses.replace(TINY.model.transformer, block_size=8))
+
+
+def test_flat_config_of_older_versions_maps_to_the_split_with_old_defaults():
+    from jaxgest.tgst.config import legacy_to_dict
+
+    new = preset("paper")
+    old = {"name": "paper", **new.model.to_dict(), "ae_window": 192, "use_cyclic": False, "ae_mirror": False}
+    for k in ("edge_frames", "swap_similarity"):  # fields added later: absent in the oldest workdirs
+        old.pop(k)
+    old["transformer"].pop("token_positions")
+    old["autoencoder"].pop("standardize")
+    cfg = Config.from_dict(json.loads(json.dumps(old)))
+    m = cfg.model
+    assert m.edge_frames == 0 and m.swap_similarity == "dot" and m.transformer.token_positions == "index"
+    assert cfg.train.autoencoder.window == 192 and not cfg.train.autoencoder.mirror
+    assert not cfg.train.transformer.use_cyclic and cfg.train.transformer.use_identity
+    assert legacy_to_dict(old)["model"]["fps"] == new.model.fps
+
+
+def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
+    from jaxgest.errors import JaxgestError
+    from jaxgest.tgst.train import apply_overrides
+
+    cfg = apply_overrides(preset("fit"), {"swap_similarity": "scaled", "transformer.token_positions": "index",
+                                          "model.autoencoder.standardize": False, "train.autoencoder.window": 32,
+                                          "ae_batch_size": 2})
+    m = cfg.model
+    assert m.swap_similarity == "scaled" and m.transformer.token_positions == "index"
+    assert not m.autoencoder.standardize and m.edge_frames == 16
+    assert cfg.train.autoencoder.window == 32 and cfg.train.autoencoder.batch_size == 2
+    assert apply_overrides(TINY, None) == TINY
+    with pytest.raises(JaxgestError, match="override"):
+        apply_overrides(TINY, {"swap_similarity": "cosine"})
+
+
+def test_checkpoints_check_only_the_model_config(tmp_path):
+    """The autoencoder checkpoint checks the autoencoder's part of the model config: other training settings or
+    transformer sizes share it, another autoencoder setting is a mismatch naming the field. A checkpoint of the
+    flat layout of older versions (whole config, fields it predates absent) matches the same model."""
+    import types
+
+    from jaxgest import training
+    from jaxgest.errors import CheckpointError
+    from jaxgest.tgst.workdir import AE_KIND, AE_SUBDIR, ae_checkpointer
+
+    def save(folder, config):
+        with training.Checkpointer(folder, kind=AE_KIND, config=config, skeleton=tdata.BODY_SIGNATURE,
+                                   subdir=AE_SUBDIR) as ck:
+            ck.save(types.SimpleNamespace(params={"w": jnp.ones(3)}, opt_state={}, step=jnp.asarray(5)))
+
+    def check(folder, model):
+        with ae_checkpointer(folder, model, read_only=True) as probe:
+            probe.check_meta(probe.stored_meta())
+
+    save(tmp_path / "new", TINY.model.autoencoder_dict())
+    check(tmp_path / "new", dataclasses.replace(TINY.model, swap_similarity="scaled"))  # transformer side: shared
+    with pytest.raises(CheckpointError, match="edge_frames"):
+        check(tmp_path / "new", dataclasses.replace(TINY.model, edge_frames=0))
+    old = {"name": "tiny", **TINY.model.to_dict(), "ae_window": 64, "ae_learning_rate": 1e-3}
+    old.pop("swap_similarity")
+    old["autoencoder"].pop("standardize")
+    save(tmp_path / "old", json.loads(json.dumps(old)))
+    check(tmp_path / "old", TINY.model)
+    with pytest.raises(CheckpointError, match="standardize"):
+        check(tmp_path / "old", dataclasses.replace(
+            TINY.model, autoencoder=dataclasses.replace(TINY.model.autoencoder, standardize=True)))

@@ -86,10 +86,19 @@ def run(args) -> tuple[dict, int]:
         except harness.EqualityError as e:
             print(f"  {case.name}: NOT TIMED, implementations disagree: {e}", flush=True)
             failures.append({"case": case.name, "error": str(e)})
+    extras = {}
+    if any(c.name.startswith("peer_zeggs") for c in cases):
+        from benchmarks.cases import peers
+
+        frames = 600
+        extras["weight_format_accuracy"] = acc = peers.format_accuracy(frames=frames)
+        print(f"  weight formats after {frames} frames (RMS pose difference vs fp32, % of the pose range): "
+              + ", ".join(f"{k} {v['rms_pct_of_range']:.3f} %" for k, v in acc.items() if isinstance(v, dict)),
+              flush=True)
     info["load_avg_1m_end"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     doc = {"machine": info, "quick": bool(args.quick), "wall_s": time.perf_counter() - t0,
            "ratios": report.ratios(records), "peer_ratios": report.peer_ratios(records),
-           "failures": failures, "records": records}
+           "failures": failures, "records": records, **extras}
     harness.validate_document(doc)
     print()
     print(report.markdown_table(records))

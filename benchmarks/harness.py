@@ -409,20 +409,23 @@ def time_interleaved(prepared: dict, *, repeats: int, warmup: int = 2, min_repea
 _PROBE: dict = {}
 
 
-def probe_machine(seconds: float = 1.0, *, gemm_n: int = 1024, stream_mb: int = 256) -> dict:
+def probe_machine(seconds: float = 1.0, *, gemm_n: int = 1024, stream_mb: int = 128) -> dict:
     """Peak float32 GEMM rate and memory read bandwidth of the moment, ~``seconds`` in total (XLA, all cores).
 
     GEMM: a jitted ``gemm_n`` x ``gemm_n`` float32 matmul, repeated for half the time, best call ->
-    ``gemm_gflops`` (2 n^3 / s). Bandwidth: a jitted sum over a ``stream_mb`` MB float32 array (too large
-    for any cache), repeated for the other half, best call -> ``mem_gbps`` (bytes read / s). The best call
-    of a short window is what the machine could give then; on a shared machine both move with the load.
+    ``gemm_gflops`` (2 n^3 / s). Bandwidth: a jitted matrix-vector product over a ``stream_mb`` MB float32
+    matrix (too large for any cache; the access pattern of batch-1 generation), repeated for the other
+    half, best call -> ``mem_gbps`` (matrix bytes / s; XLA CPU's plain reductions stream slower than its
+    dot). The best call of a short window is what the machine could give then; on a shared machine both
+    move with the load.
     """
     import jax.numpy as jnp
 
     a = jnp.asarray(np.random.default_rng(0).normal(size=(gemm_n, gemm_n)), jnp.float32)
     mm = jax.jit(lambda x, y: x @ y).lower(a, a).compile()
-    x = jnp.ones((stream_mb * 2**20 // 4,), jnp.float32)
-    red = jax.jit(jnp.sum).lower(x).compile()
+    x = jnp.ones((stream_mb * 2**20 // 4 // 4096, 4096), jnp.float32)
+    v = jnp.ones((1, x.shape[0]), jnp.float32)
+    mv = jax.jit(lambda v, x: v @ x).lower(v, x).compile()
 
     def best(f, budget):
         jax.block_until_ready(f())
@@ -435,7 +438,7 @@ def probe_machine(seconds: float = 1.0, *, gemm_n: int = 1024, stream_mb: int = 
 
     t0 = time.perf_counter()
     gemm = 2.0 * gemm_n ** 3 / best(lambda: mm(a, a), seconds / 2) / 1e9
-    bw = x.size * 4 / best(lambda: red(x), seconds / 2) / 1e9
+    bw = x.size * 4 / best(lambda: mv(v, x), seconds / 2) / 1e9
     _PROBE.clear()
     _PROBE.update(gemm_gflops=gemm, mem_gbps=bw, probe_s=time.perf_counter() - t0,
                   load_avg_1m=os.getloadavg()[0] if hasattr(os, "getloadavg") else None)

@@ -18,13 +18,25 @@ def ratios(records: list[dict]) -> dict:
     return out
 
 
+def _is_torch(impl: str) -> bool:
+    return impl == "torch" or impl.startswith("torch_")
+
+
 def peer_ratios(records: list[dict]) -> dict:
-    """``{case: {impl: torch median / impl median}}`` for cases with a ``torch`` peer (> 1: faster than it)."""
+    """``{case: {impl: best torch median / impl median}}`` for cases with PyTorch peers (> 1: faster).
+
+    "best torch" is the fastest of the case's ``torch*`` implementations (thread settings) in this run.
+    """
     by_case: dict = defaultdict(dict)
     for r in records:
         by_case[r["case"]][r["impl"]] = r["median_us"]
-    return {case: {k: impls["torch"] / v for k, v in impls.items() if k != "torch"}
-            for case, impls in by_case.items() if "torch" in impls and len(impls) > 1}
+    out = {}
+    for case, impls in by_case.items():
+        peers = [v for k, v in impls.items() if _is_torch(k)]
+        if peers and len(peers) < len(impls):
+            best = min(peers)
+            out[case] = {k: best / v for k, v in impls.items() if not _is_torch(k)}
+    return out
 
 
 def peer_table(records: list[dict]) -> str:
@@ -32,11 +44,14 @@ def peer_table(records: list[dict]) -> str:
     rat = peer_ratios(records)
     if not rat:
         return ""
-    lines = ["| case | batch | frames | impl | median ms | torch ms | speed-up vs torch | floor | of floor |",
+    lines = ["| case | batch | frames | impl | median ms | best torch ms | speed-up vs torch | floor | of floor |",
              "|---|---:|---:|---|---:|---:|---:|---|---:|"]
-    torch_ms = {r["case"]: r["median_us"] / 1e3 for r in records if r["impl"] == "torch"}
+    torch_ms: dict = {}
     for r in records:
-        if r["case"] in rat and r["impl"] != "torch":
+        if _is_torch(r["impl"]):
+            torch_ms[r["case"]] = min(torch_ms.get(r["case"], float("inf")), r["median_us"] / 1e3)
+    for r in records:
+        if r["case"] in rat and not _is_torch(r["impl"]):
             frac = r.get("floor_fraction")
             lines.append(f"| {r['case']} | {r['batch']} | {r['frames']} | {r['impl']} | {r['median_us'] / 1e3:.2f} | "
                          f"{torch_ms[r['case']]:.2f} | {rat[r['case']][r['impl']]:.2f}x | "

@@ -214,8 +214,10 @@ def test_interleaved_rounds_time_each_impl_and_floor_fractions():
     rows = [dict(_record(case="p", impl=i, median_us=m, min_us=m), floor_bound="memory", floor_fraction=0.5,
                  flops=1e6, bytes=1e6) for i, m in (("jit", 100.0), ("int8", 50.0), ("torch", 300.0))]
     assert report.peer_ratios(rows) == {"p": {"jit": 3.0, "int8": 6.0}}
-    assert "| p | 1 | 320 | int8 | 0.05 | 0.30 | 6.00x | memory | 50 % |" in report.peer_table(rows)
-    assert report.floor_table(rows).count("| p |") == 3
+    rows.append(dict(rows[-1], impl="torch_1t", median_us=200.0, min_us=200.0))
+    assert report.peer_ratios(rows) == {"p": {"jit": 2.0, "int8": 4.0}}
+    assert "| p | 1 | 320 | int8 | 0.05 | 0.20 | 4.00x | memory | 50 % |" in report.peer_table(rows)
+    assert report.floor_table(rows).count("| p |") == 4
 
 
 def test_bench_options_match_python_m_benchmarks():

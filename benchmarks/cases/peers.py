@@ -52,6 +52,15 @@ def threads() -> int:
         return os.cpu_count() or 1
 
 
+def torch_threads() -> list:
+    """The torch configurations timed: ``torch`` = as many intra-op threads as XLA uses (every core of the
+    process), ``torch_1t`` = one thread. On a loaded machine torch's OpenMP pool can be many times slower
+    with 2 threads than with 1 (a thread waits at each op's barrier for a descheduled partner), so both are
+    timed and the speed-up is stated against the faster of the two (never against a slowed-down peer)."""
+    n = threads()
+    return [("torch", n)] + ([("torch_1t", 1)] if n > 1 else [])
+
+
 def authors_config():
     """The paper preset with the authors' transformer (post-LN, one LayerNorm per block)."""
     cfg = tgst_config("paper")
@@ -115,15 +124,17 @@ def tgst_case(batch: int, frames: int = 1280, *, with_torch: bool = True, repeat
     if with_torch:
         from benchmarks import torch_peers as P
 
-        P.set_threads(threads())
         peer = {}
 
-        def torch_fn(params, content, style):
-            if "f" not in peer:
-                peer["f"] = P.tgst_call(P.load_tgst(cfg, params))
-            return peer["f"](params, content, style)
+        def make(n):
+            def torch_fn(params, content, style):
+                P.set_threads(n)
+                if "f" not in peer:
+                    peer["f"] = P.tgst_call(P.load_tgst(cfg, params))
+                return peer["f"](params, content, style)
+            return torch_fn
 
-        impls.append(Impl("torch", torch_fn))
+        impls += [Impl(name, make(n)) for name, n in torch_threads()]
     nbytes = 4.0 * batch * (frames * (cfg.autoencoder.upper_channels * 2 + cfg.autoencoder.lower_channels)
                             + STYLE_FRAMES * cfg.autoencoder.upper_channels)
     flops = tgst_flops(cfg, batch, frames, STYLE_FRAMES)
@@ -132,7 +143,7 @@ def tgst_case(batch: int, frames: int = 1280, *, with_torch: bool = True, repeat
         make_args=lambda: (tgst_params(),) + T._clips(batch, frames), rtol=1e-3, atol=1e-3,
         interleave=True, work=lambda impl: (flops, nbytes),
         note=f"authors' network (variant=authors); content {frames} + style {STYLE_FRAMES} frames; "
-             f"torch threads {threads()}",
+             f"torch threads {threads()} (torch) and 1 (torch_1t)",
     )
 
 
@@ -170,17 +181,19 @@ def zeggs_case(batch: int, frames: int, *, with_torch: bool = True, formats=("bf
     if with_torch:
         from benchmarks import torch_peers as P
 
-        P.set_threads(threads())
         P_ = cfg.pose_dim
         scale = np.asarray(input_scale(cfg, np.zeros(P_, np.float32), np.ones(P_, np.float32)))
         peer = {}
 
-        def torch_fn(params, *inputs):
-            if "f" not in peer:
-                peer["f"] = P.zeggs_call(P.load_zeggs(cfg, params), scale)
-            return peer["f"](params, *inputs)
+        def make(n):
+            def torch_fn(params, *inputs):
+                P.set_threads(n)
+                if "f" not in peer:
+                    peer["f"] = P.zeggs_call(P.load_zeggs(cfg, params), scale)
+                return peer["f"](params, *inputs)
+            return torch_fn
 
-        impls.append(Impl("torch", torch_fn))
+        impls += [Impl(name, make(n)) for name, n in torch_threads()]
     per_weight = {"bf16": 2.0, "int8": 1.0}
 
     def work(impl):

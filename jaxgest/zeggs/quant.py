@@ -72,12 +72,12 @@ def dequantize(qk: dict) -> jax.Array:
     return w if qk["scale"] is None else w * qk["scale"][None]
 
 
-def qdense(x: jax.Array, qk: dict, bias: jax.Array) -> jax.Array:
+def qdense(x: jax.Array, qk: dict, bias: jax.Array, matvec: bool = False) -> jax.Array:
     """``x (b, in) @ kernel + bias`` with the kernel in its stored format, accumulated in float32."""
     w, scale = qk["w"], qk["scale"]
     if w.dtype == jnp.float32:
         y = x @ w
-    elif x.shape[0] <= MATVEC_MAX_BATCH:
+    elif matvec and x.shape[0] <= MATVEC_MAX_BATCH:
         y = jnp.sum(x[:, :, None] * w.astype(jnp.float32)[None], axis=1)
     elif w.dtype == jnp.bfloat16:
         y = jnp.dot(x.astype(jnp.bfloat16), w, preferred_element_type=jnp.float32)
@@ -115,7 +115,7 @@ def _gru(qp: dict, h: jax.Array, x: jax.Array) -> jax.Array:
     return (1.0 - z) * n + z * h
 
 
-def make_generate(cfg: ZeggsConfig):
+def make_generate(cfg: ZeggsConfig, *, barrier: bool = False):
     """``generate(qparams, speech_embedding, style, pose0, root_position0, root_rotation0, facing,
     pose_mean=None, pose_std=None) -> {"pose", "root_position", "root_rotation"}`` on quantised params.
 
@@ -135,8 +135,9 @@ def make_generate(cfg: ZeggsConfig):
         narrow = any(leaf.dtype != jnp.float32 for leaf in jax.tree_util.tree_leaves(dec))
 
         def step(carry, inp):
-            hid, pose, pos, rot, d = carry
-            if narrow and pose.shape[0] <= MATVEC_MAX_BATCH:
+            hid, pose, pos, rot = carry
+            d = dec
+            if barrier and narrow and pose.shape[0] <= MATVEC_MAX_BATCH:
                 # tie the kernels to the loop state: their conversion stays inside the loop (fused into
                 # the products) instead of being hoisted out as a float32 copy
                 d, pose = jax.lax.optimization_barrier((d, pose))
@@ -150,10 +151,10 @@ def make_generate(cfg: ZeggsConfig):
                 new_hidden.append(h)
             y = qdense(h, d["output_layer"]["kernel"], d["output_layer"]["bias"])
             pos, rot = update_character_state(y, pos, rot, cfg=cfg, pose_mean=mean, pose_std=std)
-            return (tuple(new_hidden), y, pos, rot, d), (y, pos, rot)
+            return (tuple(new_hidden), y, pos, rot), (y, pos, rot)
 
         xs = (jnp.moveaxis(speech[:, 1:], 1, 0), jnp.moveaxis(style[:, 1:], 1, 0))
-        carry = (tuple(hidden), pose0, root_position0, root_rotation0, dec)
+        carry = (tuple(hidden), pose0, root_position0, root_rotation0)
         _, (ys, ps, qs) = jax.lax.scan(step, carry, xs)
         return _stack_outputs(pose0, root_position0, root_rotation0, *(jnp.moveaxis(a, 0, 1) for a in (ys, ps, qs)))
 

@@ -48,13 +48,16 @@ def _as_motions(styles) -> list[Motion]:
 
 def generate(audio, styles: Union[StyleLike, Sequence[StyleLike]], *, workdir,
              weights: Optional[Sequence[float]] = None, seed: int = 0, temperature: float = 1.0,
-             pca_edits: Optional[dict] = None, normalize_weights: bool = False) -> Motion:
+             pca_edits: Optional[dict] = None, normalize_weights: bool = False,
+             weight_format: str = "fp32") -> Motion:
     """Gestures for ``audio`` (a WAV/FLAC path, or ``(samples, sample_rate)``) in the style of ``styles``.
 
     ``styles``: one Motion or BVH path, or a list of them, blended as ``sum_i w_i e_i`` with ``weights``
     as given (one per clip, finite; default ``1 / n`` each; (2, 0) gives twice the first embedding);
     ``normalize_weights=True`` divides them by their sum (which must be positive). ``seed`` and ``temperature`` drive the style-embedding sample;
     ``pca_edits`` ``{component: delta in std}`` needs ``workdir/pca.json`` (``jaxgest zeggs pca``).
+    ``weight_format`` (``"fp32"`` | ``"bf16"`` | ``"int8"``): the generator's weight format (not the
+    blend ``weights``), see :mod:`jaxgest.zeggs.quant`.
     Returns a Motion on the first style clip's skeleton at its frame rate, ``round(duration * fps)`` frames.
     References: Ghorbani et al. 2023, §3, §5.2.
     """
@@ -69,7 +72,7 @@ def generate(audio, styles: Union[StyleLike, Sequence[StyleLike]], *, workdir,
         raise JaxgestError("audio must be a path or a (samples, sample_rate) pair")
     return load_model(workdir).generate(audio, _as_motions(styles), weights=weights, seed=seed,
                                         temperature=temperature, pca_edits=pca_edits, sr=sr,
-                                        normalize_weights=normalize_weights)
+                                        normalize_weights=normalize_weights, weight_format=weight_format)
 
 
 def count_params(preset: str | ZeggsConfig = "paper") -> dict[str, int]:

@@ -107,12 +107,23 @@ class ZeggsModel_:
     def _encode_speech(self, params, speech):
         return self._fns["encode_speech"](params, speech)
 
-    def _generate(self, params, s_emb, e, y0, r0, q0, f, mean, std):
+    def _generate(self, params, s_emb, e, y0, r0, q0, f, mean, std, weight_format: str = "fp32"):
         """The generator over ``s_emb (b, F, D_S)``; F padded to a bucket (the generator is causal: frames
-        after F do not change frames before it) and the output cut back to F frames."""
+        after F do not change frames before it) and the output cut back to F frames. ``weight_format``
+        ``bf16`` / ``int8``: the decoder's kernels in that format (:mod:`jaxgest.zeggs.quant`)."""
         F = s_emb.shape[1]
         L = bucket_length(F)
         s_emb = jnp.pad(s_emb, ((0, 0), (0, L - F), (0, 0)))
+        if weight_format != "fp32":
+            from jaxgest.zeggs import quant
+
+            quant.check_format(weight_format)
+            cache = self.__dict__.setdefault("_quantized", {})
+            if weight_format not in cache:
+                cache[weight_format] = quant.quantize_params(params, weight_format)
+            params = cache[weight_format]
+            out = _quant_generate(self.cfg)(params, s_emb, e, y0, r0, q0, f, mean, std)
+            return {k: v[:, :F] for k, v in out.items()}
         out = self._fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
         return {k: v[:, :F] for k, v in out.items()}
 
@@ -182,8 +193,13 @@ class ZeggsModel_:
     # -- generation --------------------------------------------------------------------------------------
     def generate(self, audio, styles: Sequence[Motion], *, weights=None, seed: int = 0, temperature: float = 1.0,
                  pca_edits: Optional[dict] = None, sr: Optional[int] = None, name: str = "generated",
-                 normalize_weights: bool = False) -> Motion:
-        """Gestures for ``audio`` in the (blended) style of ``styles``; a Motion on ``styles[0]``'s rig."""
+                 normalize_weights: bool = False, weight_format: str = "fp32") -> Motion:
+        """Gestures for ``audio`` in the (blended) style of ``styles``; a Motion on ``styles[0]``'s rig.
+
+        ``weight_format``: ``fp32`` (default), ``bf16`` or ``int8`` generator weights (not the blend
+        ``weights``; see :mod:`jaxgest.zeggs.quant`)."""
+        if weight_format not in ("fp32", "bf16", "int8"):
+            raise JaxgestError(f"weight format must be fp32, bf16 or int8, got {weight_format!r}")
         styles = list(styles)
         e = self.style_embedding(styles, weights=weights, seed=seed, temperature=temperature, pca_edits=pca_edits,
                                  normalize_weights=normalize_weights)
@@ -194,7 +210,7 @@ class ZeggsModel_:
         q0 = jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32)
         out = self._generate(self.params, s_emb, jnp.asarray(e)[None], jnp.asarray(first[:1]),
                              jnp.zeros((1, 3), jnp.float32), q0, jnp.asarray([[0.0, 0.0, 1.0]], jnp.float32),
-                             self._mean, self._std)
+                             self._mean, self._std, weight_format=weight_format)
         pose = self.pose_stats.denormalize(np.asarray(out["pose"][0], np.float64))
         root_p = np.asarray(out["root_position"][0], np.float64)
         root_q = np.asarray(out["root_rotation"][0], np.float64)
@@ -236,6 +252,14 @@ def _jitted(cfg) -> dict:
     }
 
 
+@functools.lru_cache(maxsize=8)
+def _quant_generate(cfg):
+    """The jitted generator on quantised decoder weights (:func:`jaxgest.zeggs.quant.make_generate`)."""
+    from jaxgest.zeggs import quant
+
+    return jax.jit(quant.make_generate(cfg), compiler_options=cfg.compiler_options)
+
+
 @functools.lru_cache(maxsize=4)
 def _cached(workdir: str, mtime: float) -> ZeggsModel_:
     return ZeggsModel_(workdir)
@@ -249,9 +273,11 @@ def load_model(workdir) -> ZeggsModel_:
 
 
 def generate(audio, styles, *, workdir, weights=None, seed: int = 0, temperature: float = 1.0,
-             pca_edits: Optional[dict] = None, normalize_weights: bool = False) -> Motion:
+             pca_edits: Optional[dict] = None, normalize_weights: bool = False,
+             weight_format: str = "fp32") -> Motion:
     """SPEC §7: ``generate(audio, styles, *, workdir, weights=None, seed=0, temperature=1.0) -> Motion``."""
     if isinstance(styles, Motion):
         styles = [styles]
     return load_model(workdir).generate(audio, styles, weights=weights, seed=seed, temperature=temperature,
-                                        pca_edits=pca_edits, normalize_weights=normalize_weights)
+                                        pca_edits=pca_edits, normalize_weights=normalize_weights,
+                                        weight_format=weight_format)

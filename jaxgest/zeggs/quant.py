@@ -10,13 +10,14 @@ matrix-vector products. Narrower weights stream fewer bytes:
   ``(in, out)`` kernel): ``w ~ q * scale``, ``q = round(w / scale)`` in [-127, 127], ``scale =
   max|w_col| / 127`` (1 byte per weight). Activations stay float32.
 
-:func:`qdense` dequantises in the matmul. At small batch (``x.shape[0] <= MATVEC_MAX_BATCH``) it is
-written as a fused multiply + reduce, ``sum_k x[b, k] * float(q[k, n])`` then ``* scale[n]``, which XLA CPU
-fuses into one loop nest reading the narrow weights directly; a ``dot`` on ``q.astype(float32)`` would
-materialise the float32 kernel first (no bandwidth saved). Inside the generator's scan the kernels are
-passed through ``lax.optimization_barrier`` together with the recurrent state so XLA cannot hoist the
-(loop-invariant) conversion out of the loop. At larger batch it is a ``dot`` (``bf16``: native bf16 x bf16
--> f32; ``int8``: on the dequantised kernel).
+:func:`qdense` dequantises in the matmul: ``bf16`` is a native bf16 x bf16 -> f32 ``dot``; ``int8`` a
+``dot`` on ``q.astype(float32)`` times the scales. Measured on XLA CPU (jaxlib 0.10.2, 2 cores): inside
+the generator's scan XLA hoists the (loop-invariant) conversion out of the loop, so both formats stream
+float32 weights and run at fp32 speed at batch 1; written as a fused multiply + reduce
+(``sum_k x[b, k] * float(q[k, n])``, which could stream the narrow weights) one 1262 x 4096 product takes
+~200-400 ms instead of ~1 ms, and a per-call conversion costs 3x the float32 dot -- XLA CPU has no
+fast mixed-precision matrix-vector kernel, so on this backend the formats trade accuracy for memory, not
+for batch-1 speed (the benchmark suite's ``peer_zeggs_*`` cases time them).
 
 The hidden-state initializer (run once per sequence) and the biases stay float32. Accuracy: the pose
 difference after 600 generated frames against ``fp32`` is measured by the benchmark suite
@@ -43,7 +44,6 @@ from jaxgest.zeggs.generator import (HiddenStateInitializer, _prepare, _stack_ou
                                      update_character_state)
 
 WEIGHT_FORMATS = ("fp32", "bf16", "int8")
-MATVEC_MAX_BATCH = 4  # up to this batch a product is a fused multiply + reduce (streams narrow weights)
 
 
 def check_format(weight_format: str) -> str:
@@ -72,13 +72,11 @@ def dequantize(qk: dict) -> jax.Array:
     return w if qk["scale"] is None else w * qk["scale"][None]
 
 
-def qdense(x: jax.Array, qk: dict, bias: jax.Array, matvec: bool = False) -> jax.Array:
+def qdense(x: jax.Array, qk: dict, bias: jax.Array) -> jax.Array:
     """``x (b, in) @ kernel + bias`` with the kernel in its stored format, accumulated in float32."""
     w, scale = qk["w"], qk["scale"]
     if w.dtype == jnp.float32:
         y = x @ w
-    elif matvec and x.shape[0] <= MATVEC_MAX_BATCH:
-        y = jnp.sum(x[:, :, None] * w.astype(jnp.float32)[None], axis=1)
     elif w.dtype == jnp.bfloat16:
         y = jnp.dot(x.astype(jnp.bfloat16), w, preferred_element_type=jnp.float32)
     else:
@@ -115,7 +113,7 @@ def _gru(qp: dict, h: jax.Array, x: jax.Array) -> jax.Array:
     return (1.0 - z) * n + z * h
 
 
-def make_generate(cfg: ZeggsConfig, *, barrier: bool = False):
+def make_generate(cfg: ZeggsConfig):
     """``generate(qparams, speech_embedding, style, pose0, root_position0, root_rotation0, facing,
     pose_mean=None, pose_std=None) -> {"pose", "root_position", "root_rotation"}`` on quantised params.
 
@@ -132,15 +130,10 @@ def make_generate(cfg: ZeggsConfig, *, barrier: bool = False):
         hidden = HiddenStateInitializer(cfg).apply({"params": qparams["initializer"]}, pose0 * in_scale[None],
                                                    local_facing(facing_, root_rotation0), style[:, 0])
         dec = qparams["decoder"]
-        narrow = any(leaf.dtype != jnp.float32 for leaf in jax.tree_util.tree_leaves(dec))
 
         def step(carry, inp):
             hid, pose, pos, rot = carry
             d = dec
-            if barrier and narrow and pose.shape[0] <= MATVEC_MAX_BATCH:
-                # tie the kernels to the loop state: their conversion stays inside the loop (fused into
-                # the products) instead of being hoisted out as a float32 copy
-                d, pose = jax.lax.optimization_barrier((d, pose))
             speech_t, style_t = inp
             x = jnp.concatenate([pose * in_scale[None], local_facing(facing_, rot), speech_t, style_t], axis=-1)
             h = jax.nn.elu(qdense(x, d["input_layer"]["kernel"], d["input_layer"]["bias"]))

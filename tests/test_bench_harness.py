@@ -159,7 +159,7 @@ def _conv_stack(params, x):
     """A tiny in-test case: two 1-D convolutions (lax.conv) with GELU between."""
     for i, (w, b) in enumerate(params):
         x = jax.lax.conv_general_dilated(x, w, window_strides=(2,), padding=[(1, 1)],
-                                         dimension_numbers=("NWC", "WIO", "NWC")) + b
+                                         dimension_numbers=("NWC", "WIO", "NWC")) + b[None, None]
         x = jax.nn.gelu(x, approximate=False) if i == 0 else x
     return x
 

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import argparse
 import fnmatch
+import importlib.util
 import json
+import os
 import sys
 import time
 
@@ -24,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--json", metavar="OUT", help="write machine info and the records (SPEC §8) here")
     parser.add_argument("--plot", metavar="OUT.png", help="PNG of per-pose cost against clip length")
     parser.add_argument("--cases", metavar="PATTERN", default=None,
-                        help="only these cases: comma-separated substrings or globs (e.g. 'toy*,tgst_transfer')")
+                        help="only these cases: comma-separated substrings or globs (e.g. 'peer_*,tgst_transfer')")
     parser.add_argument("--repeats", type=int, default=None, help="timed repeats per implementation")
     return parser
 
@@ -60,15 +62,22 @@ def run(args) -> tuple[dict, int]:
         raise JaxgestError(f"--repeats must be at least 2, got {args.repeats}")
     harness.configure_jax()
     t0 = time.perf_counter()
-    info = harness.machine_info()
     cases = [c for c in all_cases(quick=args.quick) if c.quick or not args.quick]
     cases = select(cases, args.cases)
     if not cases:
         raise JaxgestError(f"no benchmark case matches {args.cases!r}")
+    if importlib.util.find_spec("torch") is None:
+        print("torch not installed: PyTorch peers skipped", flush=True)
+    probe = harness.probe_machine(1.0)
+    info = harness.machine_info()
     repeats = args.repeats or (QUICK_REPEATS if args.quick else FULL_REPEATS)
     budget = QUICK_BUDGET_S if args.quick else FULL_BUDGET_S
     print(f"# jaxgest benchmarks on {info['cpu']} ({info['cores']} cores), jax {info['jax']}, "
           f"{len(cases)} cases", flush=True)
+    print(f"# probe: GEMM {probe['gemm_gflops']:.1f} GFLOP/s, memory {probe['mem_gbps']:.1f} GB/s, "
+          f"load {probe['load_avg_1m']}; XLA threads {info['xla_cpu_threads']}"
+          + (f", torch {info['torch']['version']} threads {info['torch']['threads']}" if info["torch"] else ""),
+          flush=True)
     records, failures = [], []
     for case in cases:
         try:
@@ -77,12 +86,24 @@ def run(args) -> tuple[dict, int]:
         except harness.EqualityError as e:
             print(f"  {case.name}: NOT TIMED, implementations disagree: {e}", flush=True)
             failures.append({"case": case.name, "error": str(e)})
+    extras = {}
+    if any(c.name.startswith("peer_zeggs") for c in cases):
+        from benchmarks.cases import peers
+
+        frames = 600
+        extras["weight_format_accuracy"] = acc = peers.format_accuracy(frames=frames)
+        print(f"  weight formats after {frames} frames (RMS pose difference vs fp32, % of the pose range): "
+              + ", ".join(f"{k} {v['rms_pct_of_range']:.3f} %" for k, v in acc.items() if isinstance(v, dict)),
+              flush=True)
+    info["load_avg_1m_end"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     doc = {"machine": info, "quick": bool(args.quick), "wall_s": time.perf_counter() - t0,
-           "ratios": report.ratios(records), "failures": failures, "records": records}
+           "ratios": report.ratios(records), "peer_ratios": report.peer_ratios(records),
+           "failures": failures, "records": records, **extras}
     harness.validate_document(doc)
     print()
     print(report.markdown_table(records))
-    for extra in (report.ratio_table(records), report.compile_table(records)):
+    for extra in (report.ratio_table(records), report.peer_table(records), report.floor_table(records),
+                  report.compile_table(records)):
         if extra:
             print()
             print(extra)

@@ -72,6 +72,11 @@ EXTRA_FIELDS: dict[str, tuple] = {
     "max_abs_diff": (float, type(None)),
     "group": (str,),
     "note": (str,),
+    "interleaved": (bool,),
+    "flops": (float, type(None)),
+    "bytes": (float, type(None)),
+    "floor_bound": (str, type(None)),
+    "floor_fraction": (float, type(None)),
 }
 # The JSON document written by ``--json``.
 DOCUMENT_FIELDS: dict[str, tuple] = {
@@ -99,6 +104,10 @@ class Impl:
     name: str
     fn: Callable
     kind: str = "plain"
+    # equality tolerances of this implementation against the reference (None: the case's); e.g. a
+    # reduced-precision variant checked loosely
+    rtol: Optional[float] = None
+    atol: Optional[float] = None
 
 
 @dataclasses.dataclass
@@ -122,6 +131,12 @@ class Case:
     note: str = ""
     quick: bool = True
     max_repeats_slow: int = 3  # repeats for impls slower than ~1 s per call
+    # time the implementations in interleaved rounds (A B A B ...; median of rounds): a fair ratio on a
+    # machine whose load changes during the run
+    interleave: bool = False
+    # work of one call of an implementation: ``work(impl_name) -> (flops, bytes)`` (the compulsory memory
+    # traffic), for the floor fraction (:func:`floor`)
+    work: Optional[Callable[[str], tuple]] = None
 
     @property
     def num_poses(self) -> int:
@@ -141,7 +156,7 @@ def _to_numpy_tree(x):
     return jax.tree_util.tree_map(lambda a: np.asarray(a, dtype=np.float64), x)
 
 
-def check_equal(outputs: dict, *, rtol: float, atol: float) -> dict:
+def check_equal(outputs: dict, *, rtol: float, atol: float, tolerances: Optional[dict] = None) -> dict:
     """Compare every output pytree with the first one's; return ``{impl: max_abs_diff}``.
 
     Raises :class:`EqualityError` naming the implementation that differs (structure, shape, values) or
@@ -149,12 +164,14 @@ def check_equal(outputs: dict, *, rtol: float, atol: float) -> dict:
     """
     names = list(outputs)
     ref_name = names[0]
+    rtol0, atol0 = rtol, atol
     ref_leaves, ref_def = jax.tree_util.tree_flatten_with_path(_to_numpy_tree(outputs[ref_name]))
     for path, a in ref_leaves:
         if not np.all(np.isfinite(a)):
             raise EqualityError(f"{ref_name}: output{jax.tree_util.keystr(path)} is not finite")
     diffs = {ref_name: 0.0}
     for name in names[1:]:
+        rtol, atol = (tolerances or {}).get(name, (rtol0, atol0))
         leaves, tree_def = jax.tree_util.tree_flatten_with_path(_to_numpy_tree(outputs[name]))
         if tree_def != ref_def:
             raise EqualityError(f"{name}: output structure {tree_def} differs from {ref_name}'s {ref_def}")
@@ -318,8 +335,12 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
         if compare:
             outputs[impl.name] = jax.device_get(out)
         del out
-    diffs: dict = check_equal(outputs, rtol=case.rtol, atol=case.atol) if compare else {}
+    tolerances = {i.name: (case.rtol if i.rtol is None else i.rtol, case.atol if i.atol is None else i.atol)
+                  for i in chosen}
+    diffs: dict = check_equal(outputs, rtol=case.rtol, atol=case.atol, tolerances=tolerances) if compare else {}
     del outputs
+    timed = (time_interleaved({i.name: prepared.pop(i.name) for i in chosen}, repeats=repeats)
+             if case.interleave and len(chosen) > 1 else {})
     records = []
     for impl in chosen:
         rec = {
@@ -332,14 +353,109 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
             "note": case.note,
             "max_abs_diff": diffs.get(impl.name),
         }
-        rec.update(measure(impl, args, repeats=repeats, budget_s=budget_s, slow_repeats=case.max_repeats_slow,
-                           prepared=prepared.pop(impl.name)))
+        if timed:
+            rec.update(timed[impl.name], interleaved=True)
+        else:
+            rec.update(measure(impl, args, repeats=repeats, budget_s=budget_s,
+                               slow_repeats=case.max_repeats_slow, prepared=prepared.pop(impl.name)))
         rec["per_pose_us"] = rec["median_us"] / case.num_poses
         rec["per_frame_us"] = rec["median_us"] / case.frames
+        if case.work is not None:
+            flops, nbytes = case.work(impl.name)
+            rec.update(flops=float(flops), bytes=float(nbytes))
+            rec.update(floor(flops, nbytes, rec["median_us"] * 1e-6, _PROBE))
         log(f"  {case.name:<28} {impl.name:<6} {rec['median_us'] / 1e3:10.3f} ms/call "
             f"{rec['per_pose_us']:10.4f} us/pose  compile {rec['compile_s'] or 0:5.2f} s  x{rec['repeats']}")
         records.append(rec)
     return records
+
+
+def time_interleaved(prepared: dict, *, repeats: int, warmup: int = 2, min_repeat_s: float = 0.02) -> dict:
+    """Time several prepared implementations in interleaved rounds: A B C, A B C, ... (``repeats`` rounds).
+
+    Each implementation first gets ``warmup`` untimed calls, which fix its ``inner`` count (a repeat lasts
+    at least ``min_repeat_s``); then every round times one repeat of each, in turn, so a change of the
+    machine's load hits all of them alike. Returns ``{name: timing fields}`` (median and min of the rounds).
+    """
+    calls, inner = {}, {}
+    for name, p in prepared.items():
+        warm = []
+        for _ in range(max(warmup, 1)):
+            t = time.perf_counter()
+            jax.block_until_ready(p.call())
+            warm.append(time.perf_counter() - t)
+        calls[name] = p.call
+        inner[name] = int(max(1, math.ceil(min_repeat_s / max(min(warm), 1e-9))))
+    times: dict = {n: [] for n in calls}
+    cpu: dict = {n: [] for n in calls}
+    for _ in range(repeats):
+        for name, call in calls.items():
+            c = time.process_time()
+            t = time.perf_counter()
+            for _ in range(inner[name]):
+                jax.block_until_ready(call())
+            times[name].append((time.perf_counter() - t) / inner[name])
+            cpu[name].append((time.process_time() - c) / inner[name])
+    out = {}
+    for name, p in prepared.items():
+        out[name] = dict(p.timings, repeats=len(times[name]), inner=inner[name],
+                         min_us=min(times[name]) * 1e6, median_us=statistics.median(times[name]) * 1e6,
+                         cpu_median_us=statistics.median(cpu[name]) * 1e6,
+                         peak_rss_mb=p.peak, peak_mem_mb=(None if p.rss0 is None else max(0.0, p.peak - p.rss0)))
+    return out
+
+
+# The machine probe of this run (set by :func:`probe_machine`): GEMM GFLOP/s and memory GB/s.
+_PROBE: dict = {}
+
+
+def probe_machine(seconds: float = 1.0, *, gemm_n: int = 1024, stream_mb: int = 128) -> dict:
+    """Peak float32 GEMM rate and memory read bandwidth of the moment, ~``seconds`` in total (XLA, all cores).
+
+    GEMM: a jitted ``gemm_n`` x ``gemm_n`` float32 matmul, repeated for half the time, best call ->
+    ``gemm_gflops`` (2 n^3 / s). Bandwidth: a jitted matrix-vector product over a ``stream_mb`` MB float32
+    matrix (too large for any cache; the access pattern of batch-1 generation), repeated for the other
+    half, best call -> ``mem_gbps`` (matrix bytes / s; XLA CPU's plain reductions stream slower than its
+    dot). The best call of a short window is what the machine could give then; on a shared machine both
+    move with the load.
+    """
+    import jax.numpy as jnp
+
+    a = jnp.asarray(np.random.default_rng(0).normal(size=(gemm_n, gemm_n)), jnp.float32)
+    mm = jax.jit(lambda x, y: x @ y).lower(a, a).compile()
+    x = jnp.ones((stream_mb * 2**20 // 4 // 4096, 4096), jnp.float32)
+    v = jnp.ones((1, x.shape[0]), jnp.float32)
+    mv = jax.jit(lambda v, x: v @ x).lower(v, x).compile()
+
+    def best(f, budget):
+        jax.block_until_ready(f())
+        out, t_end = [], time.perf_counter() + budget
+        while time.perf_counter() < t_end or len(out) < 3:
+            t = time.perf_counter()
+            jax.block_until_ready(f())
+            out.append(time.perf_counter() - t)
+        return min(out)
+
+    t0 = time.perf_counter()
+    gemm = 2.0 * gemm_n ** 3 / best(lambda: mm(a, a), seconds / 2) / 1e9
+    bw = x.size * 4 / best(lambda: mv(v, x), seconds / 2) / 1e9
+    _PROBE.clear()
+    _PROBE.update(gemm_gflops=gemm, mem_gbps=bw, probe_s=time.perf_counter() - t0,
+                  load_avg_1m=os.getloadavg()[0] if hasattr(os, "getloadavg") else None)
+    return dict(_PROBE)
+
+
+def floor(flops: float, nbytes: float, seconds: float, probe: dict) -> dict:
+    """The compute / memory floor of a call: ``{"floor_bound", "floor_fraction"}``.
+
+    floor = max(flops / GEMM peak, bytes / bandwidth) of the probe; fraction = floor / measured time (1 =
+    at the machine's limit; nulls without a probe).
+    """
+    if not probe or seconds <= 0:
+        return {"floor_bound": None, "floor_fraction": None}
+    t_c = flops / (probe["gemm_gflops"] * 1e9)
+    t_m = nbytes / (probe["mem_gbps"] * 1e9)
+    return {"floor_bound": "compute" if t_c >= t_m else "memory", "floor_fraction": max(t_c, t_m) / seconds}
 
 
 def _check_fields(obj: dict, fields: dict, required: bool, what: str) -> None:
@@ -415,4 +531,18 @@ def machine_info() -> dict:
         "load_avg_1m": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
         "persistent_compilation_cache": bool(jax.config.jax_enable_compilation_cache
                                              and jax.config.jax_compilation_cache_dir),
+        # XLA's CPU client runs one intra-op thread pool over every core the process may use
+        "xla_cpu_threads": affinity or os.cpu_count(),
+        "torch": _torch_info(),
+        "probe": dict(_PROBE) or None,
     }
+
+
+def _torch_info() -> Optional[dict]:
+    """torch version and intra-op threads when the suite imported torch (the PyTorch peers), else None."""
+    import sys
+
+    torch = sys.modules.get("torch")
+    if torch is None:
+        return None
+    return {"version": torch.__version__, "threads": torch.get_num_threads()}

@@ -18,6 +18,60 @@ def ratios(records: list[dict]) -> dict:
     return out
 
 
+def _is_torch(impl: str) -> bool:
+    return impl == "torch" or impl.startswith("torch_")
+
+
+def peer_ratios(records: list[dict]) -> dict:
+    """``{case: {impl: best torch median / impl median}}`` for cases with PyTorch peers (> 1: faster).
+
+    "best torch" is the fastest of the case's ``torch*`` implementations (thread settings) in this run.
+    """
+    by_case: dict = defaultdict(dict)
+    for r in records:
+        by_case[r["case"]][r["impl"]] = r["median_us"]
+    out = {}
+    for case, impls in by_case.items():
+        peers = [v for k, v in impls.items() if _is_torch(k)]
+        if peers and len(peers) < len(impls):
+            best = min(peers)
+            out[case] = {k: best / v for k, v in impls.items() if not _is_torch(k)}
+    return out
+
+
+def peer_table(records: list[dict]) -> str:
+    """Cases with a PyTorch peer: ms per call of each impl and the speed-up over torch."""
+    rat = peer_ratios(records)
+    if not rat:
+        return ""
+    lines = ["| case | batch | frames | impl | median ms | best torch ms | speed-up vs torch | floor | of floor |",
+             "|---|---:|---:|---|---:|---:|---:|---|---:|"]
+    torch_ms: dict = {}
+    for r in records:
+        if _is_torch(r["impl"]):
+            torch_ms[r["case"]] = min(torch_ms.get(r["case"], float("inf")), r["median_us"] / 1e3)
+    for r in records:
+        if r["case"] in rat and not _is_torch(r["impl"]):
+            frac = r.get("floor_fraction")
+            lines.append(f"| {r['case']} | {r['batch']} | {r['frames']} | {r['impl']} | {r['median_us'] / 1e3:.2f} | "
+                         f"{torch_ms[r['case']]:.2f} | {rat[r['case']][r['impl']]:.2f}x | "
+                         f"{r.get('floor_bound') or ''} | {'' if frac is None else f'{100 * frac:.0f} %'} |")
+    return "\n".join(lines)
+
+
+def floor_table(records: list[dict]) -> str:
+    """Records with a work estimate: GFLOP/s, GB/s achieved and the fraction of the compute/memory floor."""
+    rows = [r for r in records if r.get("floor_fraction") is not None]
+    if not rows:
+        return ""
+    lines = ["| case | impl | GFLOP/s | GB/s | bound | of floor |", "|---|---|---:|---:|---|---:|"]
+    for r in rows:
+        s = r["median_us"] * 1e-6
+        lines.append(f"| {r['case']} | {r['impl']} | {r['flops'] / s / 1e9:.1f} | {r['bytes'] / s / 1e9:.2f} | "
+                     f"{r['floor_bound']} | {100 * r['floor_fraction']:.0f} % |")
+    return "\n".join(lines)
+
+
 def _us(x: float) -> str:
     return f"{x:,.1f}" if x < 1e4 else f"{x:,.0f}"
 

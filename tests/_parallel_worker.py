@@ -152,10 +152,10 @@ def _tgst_setup(batch_size: int):
     import dataclasses
 
     from jaxgest.tgst import data as tdata
-    from jaxgest.tgst.config import get_config
+    from jaxgest.tgst.config import preset
 
     if "tgst" not in _DATA:
-        cfg0 = get_config("tiny")
+        cfg0 = preset("tiny")
         body = tdata.load_body_data(_synthetic_dir(), cfg0)
         _DATA["tgst"] = (tdata.fit_windows(cfg0, body), body)
     cfg, body = _DATA["tgst"]

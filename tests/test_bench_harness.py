@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import pathlib
@@ -16,15 +17,16 @@ import pytest
 
 from benchmarks import __main__ as bench_main
 from benchmarks import harness, report
-from benchmarks.cases import case_modules, toy
+from benchmarks.cases import case_modules
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
+CLI_CASE = "zeggs_generate_check_b1"  # a real case with jit / eager / numpy that runs in seconds
 QUIET = dict(log=lambda s: None)
 
 
 def _case(impls, **kw):
     x = np.linspace(0, 1, 64, dtype=np.float32)
-    return harness.Case(name="toy", batch=1, frames=64, impls=impls, make_args=lambda: (x,), **kw)
+    return harness.Case(name="tiny", batch=1, frames=64, impls=impls, make_args=lambda: (x,), **kw)
 
 
 def _record(**kw):
@@ -146,22 +148,76 @@ def test_reports_table_ratios_and_plot(tmp_path):
 
 
 def test_case_selection_by_substring_and_glob():
-    cases = [harness.Case(n, 1, 1, [], lambda: ()) for n in ("toy_conv_b1", "toy_conv_b8", "tgst_transfer_b1")]
+    cases = [harness.Case(n, 1, 1, [], lambda: ()) for n in ("peer_tgst_b1", "peer_tgst_b8", "tgst_transfer_b1")]
     names = lambda pat: [c.name for c in bench_main.select(cases, pat)]  # noqa: E731
-    assert names("b1") == ["toy_conv_b1", "tgst_transfer_b1"]
-    assert names("toy*,tgst_transfer") == [c.name for c in cases]
-    assert names("toy_conv_b?") == ["toy_conv_b1", "toy_conv_b8"] and names("nope") == []
+    assert names("b1") == ["peer_tgst_b1", "tgst_transfer_b1"]
+    assert names("peer*,tgst_transfer") == [c.name for c in cases]
+    assert names("peer_tgst_b?") == ["peer_tgst_b1", "peer_tgst_b8"] and names("nope") == []
 
 
-def test_toy_numpy_matches_jax_and_registry_finds_it():
-    params = toy.init_params(3)
-    x = np.random.default_rng(0).normal(size=(2, 37, 39)).astype(np.float32)
-    ref = toy.conv_stack_numpy(params, x)
-    assert ref.shape == (2, 10, 16)  # ceil(37 / 4) frames after two stride-2 convs
-    np.testing.assert_allclose(np.asarray(jax.jit(toy.conv_stack)(params, x)), ref, rtol=1e-4, atol=1e-4)
-    assert "benchmarks.cases.toy" in case_modules()
-    quick = [c.name for c in toy.cases(quick=True)]
-    assert {"toy_conv_b1", "toy_conv_b8", "toy_conv_scaling_320", "toy_conv_scaling_20480"} <= set(quick)
+def _conv_stack(params, x):
+    """A tiny in-test case: two 1-D convolutions (lax.conv) with GELU between."""
+    for i, (w, b) in enumerate(params):
+        x = jax.lax.conv_general_dilated(x, w, window_strides=(2,), padding=[(1, 1)],
+                                         dimension_numbers=("NWC", "WIO", "NWC")) + b[None, None]
+        x = jax.nn.gelu(x, approximate=False) if i == 0 else x
+    return x
+
+
+def _conv_stack_numpy(params, x, *, flip=False):
+    """The same stack as im2col + GEMM in NumPy; ``flip=True`` is a plausible bug (the kernel reversed)."""
+    from math import erf
+
+    h = np.asarray(x, np.float64)
+    for i, (w, b) in enumerate(params):
+        w = np.asarray(w, np.float64)[::-1] if flip else np.asarray(w, np.float64)
+        hp = np.pad(h, ((0, 0), (1, 1), (0, 0)))
+        cols = np.lib.stride_tricks.sliding_window_view(hp, 3, axis=1)[:, ::2]  # (B, F', C, k)
+        h = np.einsum("bfck,kco->bfo", cols, w) + np.asarray(b)
+        if i == 0:
+            h = 0.5 * h * (1.0 + np.vectorize(erf)(h / np.sqrt(2.0)))
+    return h
+
+
+def test_a_wrong_implementation_of_a_conv_case_is_caught():
+    rng = np.random.default_rng(0)
+    params = [(jnp.asarray(rng.normal(size=(3, 5, 8)) / 4, jnp.float32), jnp.asarray(rng.normal(size=8), jnp.float32)),
+              (jnp.asarray(rng.normal(size=(3, 8, 4)) / 5, jnp.float32), jnp.asarray(rng.normal(size=4), jnp.float32))]
+    x = jnp.asarray(rng.normal(size=(2, 37, 5)), jnp.float32)
+
+    def case(impls):
+        return harness.Case("conv", 2, 37, impls, make_args=lambda: (params, x), rtol=1e-4, atol=1e-4)
+
+    jit = harness.Impl("jit", _conv_stack, kind="jit")
+    recs = harness.run_case(case([jit, harness.Impl("numpy", _conv_stack_numpy)]), repeats=2, **QUIET)
+    assert recs[1]["max_abs_diff"] < 1e-4 and np.asarray(_conv_stack(params, x)).shape == (2, 10, 4)
+    wrong = harness.Impl("numpy", lambda p, v: _conv_stack_numpy(p, v, flip=True))
+    with pytest.raises(harness.EqualityError, match="^numpy: output differs from jit's"):
+        harness.run_case(case([jit, wrong]), repeats=2, **QUIET)
+
+
+def test_interleaved_rounds_time_each_impl_and_floor_fractions():
+    slow = harness.Impl("slow", lambda x: time.sleep(0.01) or x)
+    fast = harness.Impl("fast", lambda x: x)
+    recs = harness.run_case(_case([slow, fast], interleave=True, work=lambda impl: (1e6, 1e6)), repeats=3, **QUIET)
+    assert [r["impl"] for r in recs] == ["slow", "fast"] and all(r["interleaved"] for r in recs)
+    assert recs[0]["repeats"] == recs[1]["repeats"] == 3
+    assert 8_000 <= recs[0]["median_us"] <= 60_000 and recs[1]["median_us"] < 1_000
+    probe = harness.probe_machine(0.2, gemm_n=256, stream_mb=32)
+    assert probe["gemm_gflops"] > 0.1 and probe["mem_gbps"] > 0.1
+    f = harness.floor(2e9, 1e6, 1.0, {"gemm_gflops": 4.0, "mem_gbps": 10.0})
+    assert f == {"floor_bound": "compute", "floor_fraction": pytest.approx(0.5)}
+    f = harness.floor(1e6, 1e10, 2.0, {"gemm_gflops": 4.0, "mem_gbps": 10.0})
+    assert f["floor_bound"] == "memory" and f["floor_fraction"] == pytest.approx(0.5)
+    for r in recs:
+        harness.validate_record(r)
+    rows = [dict(_record(case="p", impl=i, median_us=m, min_us=m), floor_bound="memory", floor_fraction=0.5,
+                 flops=1e6, bytes=1e6) for i, m in (("jit", 100.0), ("int8", 50.0), ("torch", 300.0))]
+    assert report.peer_ratios(rows) == {"p": {"jit": 3.0, "int8": 6.0}}
+    rows.append(dict(rows[-1], impl="torch_1t", median_us=200.0, min_us=200.0))
+    assert report.peer_ratios(rows) == {"p": {"jit": 2.0, "int8": 4.0}}
+    assert "| p | 1 | 320 | int8 | 0.05 | 0.20 | 4.00x | memory | 50 % |" in report.peer_table(rows)
+    assert report.floor_table(rows).count("| p |") == 4
 
 
 def test_bench_options_match_python_m_benchmarks():
@@ -189,15 +245,18 @@ def test_jaxgest_bench_help():
 def test_python_m_benchmarks_writes_valid_json_and_table(tmp_path):
     out = tmp_path / "bench.json"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    r = subprocess.run([sys.executable, "-m", "benchmarks", "--quick", "--cases", "toy_conv_b1", "--repeats", "2",
-                        "--json", str(out)], cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "benchmarks", "--quick", "--cases", CLI_CASE, "--repeats", "2",
+                        "--json", str(out)], cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(out.read_text())
     harness.validate_document(doc)
-    assert [(x["case"], x["impl"]) for x in doc["records"]] == [("toy_conv_b1", i) for i in ("jit", "eager", "numpy")]
+    assert [(x["case"], x["impl"]) for x in doc["records"]] == [(CLI_CASE, i) for i in ("jit", "eager", "numpy")]
     assert doc["machine"]["cores"] >= 1 and doc["quick"] is True and doc["failures"] == []
-    assert set(doc["ratios"]["toy_conv_b1"]) == {"eager", "numpy"}
-    assert "| toy_conv_b1 | jit | 1 | 1280 |" in r.stdout and "| eager/jit | numpy/jit |" in r.stdout
+    assert doc["machine"]["probe"]["gemm_gflops"] > 0 and doc["machine"]["probe"]["mem_gbps"] > 0
+    assert set(doc["ratios"][CLI_CASE]) == {"eager", "numpy"}
+    assert f"| {CLI_CASE} | jit | 1 |" in r.stdout and "| eager/jit | numpy/jit |" in r.stdout
+    torch_line = "torch not installed: PyTorch peers skipped"
+    assert (torch_line in r.stdout) == (importlib.util.find_spec("torch") is None)
 
 
 def test_no_matching_case_is_a_one_line_error(tmp_path):
@@ -214,10 +273,10 @@ def test_no_matching_case_is_a_one_line_error(tmp_path):
 
 def test_numpy_reference_matches_the_jax_transfer():
     from benchmarks import numpy_tgst
-    from jaxgest.tgst.config import get_config
+    from jaxgest.tgst.config import preset
     from jaxgest.tgst.model import init_params, transfer_arrays
 
-    cfg = get_config("paper").model
+    cfg = preset("paper").model
     params = jax.jit(lambda k: init_params(cfg, k))(jax.random.key(1))
     rng = np.random.default_rng(0)
     c = rng.normal(scale=0.4, size=(2, 100, 39)).astype(np.float32)

@@ -21,10 +21,11 @@ How to add a case
 A module whose import fails because a ``jaxgest`` model module does not exist yet (or lacks a name) is
 skipped with a note; any other import error is a bug and propagates.
 
-``toy`` is the harness demonstration (an inline conv stack, not a model); the model cases live in
-``tgst`` (transfer, clip-length scaling, stages), ``zeggs`` (generation per frame, style encoder, speech
-encoder and features), ``training`` (one optimiser step per model) and ``zeggs_variants`` (benchmark-local
-generator optimisation experiments, full run only).
+The model cases live in ``tgst`` (transfer, clip-length scaling, stages), ``zeggs`` (generation per frame,
+style encoder, speech encoder and features), ``training`` (one optimiser step per model),
+``zeggs_variants`` (benchmark-local generator optimisation experiments, full run only) and ``peers``
+(side by side with eager PyTorch ports of the authors' networks, interleaved rounds; weight formats of
+the ZeroEGGS generator).
 """
 
 from __future__ import annotations

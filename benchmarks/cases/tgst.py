@@ -16,18 +16,18 @@ import numpy as np
 from benchmarks import numpy_tgst
 from benchmarks.harness import Case, Impl
 from jaxgest.tgst import model as M
-from jaxgest.tgst.config import get_config
+from jaxgest.tgst.config import preset
 
 STYLE_FRAMES = 1280
 
 
-CFG = get_config("paper").model
+CFG = preset("paper").model
 
 
 @functools.lru_cache(maxsize=None)
 def _params():
     """The paper preset's parameters (random init, seed 0), built on first use."""
-    return jax.jit(lambda k: M.init_params(CFG, k))(jax.random.PRNGKey(0))
+    return jax.jit(lambda k: M.init_params(CFG, k))(jax.random.key(0))
 
 
 def _clips(batch, frames, style_frames=STYLE_FRAMES):

@@ -31,7 +31,7 @@ from flax.training.train_state import TrainState
 from benchmarks.harness import Case, Impl
 from jaxgest.tgst import model as TM
 from jaxgest.tgst import steps as TS
-from jaxgest.tgst.config import get_config as tgst_config
+from jaxgest.tgst.config import preset as tgst_config
 from jaxgest.zeggs import steps as ZS
 from jaxgest.zeggs.config import preset as zeggs_config
 from jaxgest.zeggs.model import ZeggsModel
@@ -39,7 +39,7 @@ from jaxgest.zeggs.model import ZeggsModel
 
 @functools.lru_cache(maxsize=None)
 def _tgst_params():
-    return jax.jit(lambda k: TM.init_params(tgst_config("paper").model, k))(jax.random.PRNGKey(0))
+    return jax.jit(lambda k: TM.init_params(tgst_config("paper").model, k))(jax.random.key(0))
 
 
 def _f32(rng, shape, scale=1.0):
@@ -56,7 +56,7 @@ def tgst_ae_case() -> Case:
         rng = np.random.default_rng(1)
         batch = {"upper": _f32(rng, (b, f, cfg.model.autoencoder.upper_channels), 0.4),
                  "lower": _f32(rng, (b, f, cfg.model.autoencoder.lower_channels), 0.4)}
-        return state, batch, jax.random.PRNGKey(0)
+        return state, batch, jax.random.key(0)
 
     return Case(name="train_tgst_autoencoder", batch=b, frames=f,
                 impls=[Impl("jit", jax.jit(TS.make_ae_train_step(cfg, tx)), kind="jit")], make_args=make_args,
@@ -79,7 +79,7 @@ def tgst_transformer_case() -> Case:
         rng = np.random.default_rng(2)
         c = cfg.model.autoencoder.upper_channels
         batch = {"content": _f32(rng, (b, f, c), 0.4), "style": _f32(rng, (b, f, c), 0.4)}
-        return state, batch, jax.random.PRNGKey(0), p["autoencoder"]
+        return state, batch, jax.random.key(0), p["autoencoder"]
 
     return Case(name="train_tgst_transformer", batch=b, frames=f,
                 impls=[Impl("jit", jax.jit(step), kind="jit")], make_args=make_args,

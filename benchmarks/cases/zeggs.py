@@ -43,7 +43,7 @@ CHECK_FRAMES = 8  # generated frames of the equality-check cases (eager JAX is ~
 
 def random_params(cfg: ModelConfig, seed: int = 0) -> dict:
     """Parameters shaped as ``init_params(cfg)``: LeCun-normal kernels, zero biases, unit LayerNorm scales."""
-    shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.PRNGKey(0))
+    shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.key(0))
     rng = np.random.default_rng(seed)
 
     def fill(path, leaf):

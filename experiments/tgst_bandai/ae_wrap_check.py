@@ -11,7 +11,7 @@ Run from the repository root: python experiments/tgst_bandai/ae_wrap_check.py {r
 import time, sys
 import jax, optax, numpy as np
 from jaxgest.tgst import data as tdata
-from jaxgest.tgst.config import get_config
+from jaxgest.tgst.config import preset
 from jaxgest.tgst.model import init_params
 from jaxgest.tgst.steps import create_ae_state, make_ae_train_step
 from jaxgest.motion import body as B, rotations as R, datasets, kinematics as K
@@ -38,7 +38,7 @@ mode = args.mode
 sys.argv[2:] = [str(args.lr), str(args.steps)]
 if mode == "rest":
     tdata.motion_to_arrays = rest_relative
-cfg0 = get_config("paper")
+cfg0 = preset("paper")
 bd = tdata.load_body_data("../shared/data/bandai-namco-1", cfg0)
 x = np.concatenate([np.concatenate([u, l], 1) for u, l in zip(bd.upper, bd.lower)]).reshape(-1, 21, 3)
 n = np.linalg.norm(x, axis=-1)
@@ -48,13 +48,13 @@ print(mode, "joint-frames with a jump > 0.5 rad:", sum(int((j > 0.5).sum()) for 
       sum(j.size for j in jumps))
 print(mode, "max angle per joint", np.round(n.max(0), 2), "max frame jump", np.round(max(np.abs(np.diff(np.concatenate([u, l], 1), axis=0)).max() for u, l in zip(bd.upper, bd.lower)), 2))
 cfg = tdata.fit_windows(cfg0, bd)
-p0 = init_params(cfg.model, jax.random.PRNGKey(0))
+p0 = init_params(cfg.model, jax.random.key(0))
 lr = float(sys.argv[2])
 tx = optax.adam(lr)
 st = create_ae_state(cfg, p0["autoencoder"], tx)
 step = jax.jit(make_ae_train_step(cfg, tx))
 t = time.time()
 for i in range(int(sys.argv[3])):
-    st, m = step(st, tdata.ae_batch(bd, cfg, 0, i), jax.random.PRNGKey(i))
+    st, m = step(st, tdata.ae_batch(bd, cfg, 0, i), jax.random.key(i))
     if (i + 1) % 500 == 0:
         print(mode, lr, i + 1, {k: round(float(v), 3) for k, v in m.items()}, f"{time.time()-t:.0f}s", flush=True)

@@ -36,7 +36,7 @@ from jaxgest.motion import body, datasets
 from jaxgest.tgst import baselines
 from jaxgest.tgst import model as tmodel
 from jaxgest.tgst.autoencoder import angular_error_rad
-from jaxgest.tgst.config import config_from_dict
+from jaxgest.tgst.config import Config
 from jaxgest.tgst.evaluate import clip_features, features_errors, make_pairs
 
 TRUNK = ("Hips", "Spine", "Chest", "Neck", "Head")
@@ -49,8 +49,8 @@ def load_params(workdir, ae_step=None, transformer=True):
     from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
 
     stored = json.loads((pathlib.Path(workdir) / "config.json").read_text())
-    cfg = config_from_dict(stored["config"]).model
-    template = jax.eval_shape(lambda k: tmodel.init_params(cfg, k), jax.random.PRNGKey(0))
+    cfg = Config.from_dict(stored["config"]).model
+    template = jax.eval_shape(lambda k: tmodel.init_params(cfg, k), jax.random.key(0))
     ck = ae_checkpointer(workdir, cfg, read_only=True)
     params = {"autoencoder": ck.restore_params(template["autoencoder"], step=ae_step)}
     ck.close()

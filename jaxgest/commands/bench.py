@@ -49,7 +49,7 @@ def register(subparsers) -> None:
     p.add_argument("--json", metavar="OUT", help="write machine info and the records (SPEC §8) here")
     p.add_argument("--plot", metavar="OUT.png", help="PNG of per-pose cost against clip length")
     p.add_argument("--cases", metavar="PATTERN", default=None,
-                   help="only these cases: comma-separated substrings or globs (e.g. 'toy*,tgst_transfer')")
+                   help="only these cases: comma-separated substrings or globs (e.g. 'peer_*,tgst_transfer')")
     p.add_argument("--repeats", type=int, default=None, help="timed repeats per implementation")
     p.set_defaults(func=_run)
 

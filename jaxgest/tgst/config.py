@@ -332,5 +332,3 @@ def preset(name: str = "paper") -> Config:
     raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit' or 'tiny')")
 
 
-get_config = preset  # the earlier name
-config_from_dict = Config.from_dict  # the earlier name

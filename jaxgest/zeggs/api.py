@@ -91,7 +91,7 @@ MODEL_CACHE = ModelCache()  # what generate() uses by default
 def generate(audio, styles: Union[StyleLike, Sequence[StyleLike]], *, workdir,
              weights: Optional[Sequence[float]] = None, seed: int = 0, temperature: float = 1.0,
              pca_edits: Optional[dict] = None, normalize_weights: bool = False,
-             cache: Optional[ModelCache] = MODEL_CACHE) -> Motion:
+             cache: Optional[ModelCache] = MODEL_CACHE, weight_format: str = "fp32") -> Motion:
     """Gestures for ``audio`` (a WAV/FLAC path, or ``(samples, sample_rate)``) in the style of ``styles``.
 
     ``styles``: one Motion or BVH path, or a list of them, blended as ``sum_i w_i e_i`` with ``weights``
@@ -100,6 +100,8 @@ def generate(audio, styles: Union[StyleLike, Sequence[StyleLike]], *, workdir,
     ``temperature`` drive the style-embedding sample;
     ``pca_edits`` ``{component: delta in std}`` needs ``workdir/pca.json`` (``jaxgest zeggs pca``).
     ``cache``: where loaded models are kept (:class:`ModelCache`; None: load the workdir now).
+    ``weight_format`` (``"fp32"`` | ``"bf16"`` | ``"int8"``): the generator's weight format (not the
+    blend ``weights``), see :mod:`jaxgest.zeggs.quant`.
     Returns a Motion on the first style clip's skeleton at its frame rate, ``round(duration * fps)`` frames.
     References: Ghorbani et al. 2023, §3, §5.2.
     """
@@ -114,7 +116,8 @@ def generate(audio, styles: Union[StyleLike, Sequence[StyleLike]], *, workdir,
         raise JaxgestError("audio must be a path or a (samples, sample_rate) pair")
     model = load_model(workdir) if cache is None else cache.get(workdir)
     return model.generate(audio, _as_motions(styles), weights=weights, seed=seed, temperature=temperature,
-                          pca_edits=pca_edits, sr=sr, normalize_weights=normalize_weights)
+                          pca_edits=pca_edits, sr=sr, normalize_weights=normalize_weights,
+                          weight_format=weight_format)
 
 
 def count_params(preset: str | Config | ModelConfig = "paper") -> dict[str, int]:

@@ -39,6 +39,8 @@ def register(subparsers) -> None:
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--temperature", type=float, default=None,
                    help="style sampling temperature (default: the model's inference config, 1.0)")
+    g.add_argument("--weight-format", default="fp32", choices=("fp32", "bf16", "int8"),
+                   help="generator weight format (not the blend --weights): bf16 or int8 weight-only")
     g.add_argument("--pca-edit", action="append", default=[], metavar="K=DELTA",
                    help="move the style embedding along PCA component K by DELTA standard deviations")
     g.add_argument("--out", required=True, help="output BVH (on the first style clip's skeleton)")
@@ -136,7 +138,8 @@ def _generate(args) -> int:
         raise JaxgestError(f"{args.audio}: no such audio file")
     model = load_model(args.workdir)
     motion = model.generate(args.audio, styles, weights=weights, seed=args.seed, temperature=args.temperature,
-                            pca_edits=edits, name=out.stem, normalize_weights=args.normalize_weights)
+                            pca_edits=edits, name=out.stem, normalize_weights=args.normalize_weights,
+                            weight_format=args.weight_format)
     bvh.save(motion, out)
     print(f"zeggs: wrote {out} ({motion.num_frames} frames at {motion.fps:g} fps, "
           f"{motion.skeleton.num_joints} joints)")

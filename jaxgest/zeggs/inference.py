@@ -33,7 +33,7 @@ import numpy as np
 from jaxgest.errors import DataError, JaxgestError
 from jaxgest.motion.retarget import to_rig
 from jaxgest.motion.skeleton import Motion
-from jaxgest.zeggs import features
+from jaxgest.zeggs import features, quant
 from jaxgest.zeggs.generator import input_scale
 from jaxgest.zeggs.model import apply_fns
 from jaxgest.zeggs.style_encoder import sample_style
@@ -78,6 +78,7 @@ class TrainedZeggs:
         self.pose_std = jnp.asarray(self.pose_stats.std, jnp.float32)
         self.input_scale = input_scale(self.cfg.model, self.pose_mean, self.pose_std)  # inputs: one std per group
         self.fns = apply_fns(self.cfg.model, self.cfg.inference.compiler_options)
+        self.quantized = {}  # weight format -> (decoder weights in that format, its jitted generator)
 
     def encode_style(self, params, style, mask):
         """Style posterior of ``(b, S, P)`` clips; lengths padded (masked) to a bucket: few compilations."""
@@ -91,13 +92,24 @@ class TrainedZeggs:
         """Speech embeddings ``(b, F, D_S)`` of normalised speech features ``(b, F, 81)``."""
         return self.fns["encode_speech"](params, speech)
 
-    def run_generator(self, params, s_emb, e, y0, r0, q0, f, mean, std):
+    def run_generator(self, params, s_emb, e, y0, r0, q0, f, mean, std, weight_format: str = "fp32"):
         """The generator over ``s_emb (b, F, D_S)``; F padded to a bucket (the generator is causal: frames
-        after F do not change frames before it) and the output cut back to F frames."""
+        after F do not change frames before it) and the output cut back to F frames. ``weight_format``
+        ``bf16`` / ``int8``: the decoder's kernels in that format (:mod:`jaxgest.zeggs.quant`; converted once
+        per model object and format)."""
         F = s_emb.shape[1]
         L = bucket_length(F)
         s_emb = jnp.pad(s_emb, ((0, 0), (0, L - F), (0, 0)))
-        out = self.fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
+        if quant.check_format(weight_format) == "fp32":
+            out = self.fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
+        else:
+            if weight_format not in self.quantized:
+                self.quantized[weight_format] = (
+                    quant.quantize_params(params, weight_format),
+                    jax.jit(quant.make_generate(self.cfg.model),
+                            compiler_options=self.cfg.inference.compiler_options))
+            qparams, fn = self.quantized[weight_format]
+            out = fn(qparams, s_emb, e, y0, r0, q0, f, mean, std)
         return {k: v[:, :F] for k, v in out.items()}
 
     # -- pieces ------------------------------------------------------------------------------------------
@@ -173,8 +185,14 @@ class TrainedZeggs:
     def generate(self, audio, styles: Sequence[Motion], *, weights=None, seed: int = 0,
                  temperature: Optional[float] = None,
                  pca_edits: Optional[dict] = None, sr: Optional[int] = None, name: str = "generated",
-                 normalize_weights: bool = False) -> Motion:
-        """Gestures for ``audio`` in the (blended) style of ``styles``; a Motion on ``styles[0]``'s rig."""
+                 normalize_weights: bool = False, weight_format: str = "fp32") -> Motion:
+        """Gestures for ``audio`` in the (blended) style of ``styles``; a Motion on ``styles[0]``'s rig.
+
+        ``weight_format``: ``fp32`` (default), ``bf16`` or ``int8`` generator weights (not the blend
+        ``weights``; see :mod:`jaxgest.zeggs.quant`)."""
+        if weight_format not in quant.WEIGHT_FORMATS:
+            raise JaxgestError(f"weight format must be one of {', '.join(quant.WEIGHT_FORMATS)}, "
+                               f"got {weight_format!r}")
         styles = list(styles)
         e = self.style_embedding(styles, weights=weights, seed=seed, temperature=temperature, pca_edits=pca_edits,
                                  normalize_weights=normalize_weights)
@@ -185,7 +203,7 @@ class TrainedZeggs:
         q0 = jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32)
         out = self.run_generator(self.params, s_emb, jnp.asarray(e)[None], jnp.asarray(first[:1]),
                                  jnp.zeros((1, 3), jnp.float32), q0, jnp.asarray([[0.0, 0.0, 1.0]], jnp.float32),
-                                 self.pose_mean, self.pose_std)
+                                 self.pose_mean, self.pose_std, weight_format=weight_format)
         pose = self.pose_stats.denormalize(np.asarray(out["pose"][0], np.float64))
         root_p = np.asarray(out["root_position"][0], np.float64)
         root_q = np.asarray(out["root_rotation"][0], np.float64)

@@ -16,19 +16,10 @@ import os
 import sys
 import time
 
+from jaxgest.commands.bench import add_arguments  # the options shared with `jaxgest bench`
+
 QUICK_REPEATS, FULL_REPEATS = 3, 7
 QUICK_BUDGET_S, FULL_BUDGET_S = 4.0, 20.0  # timed repeats per implementation (at least 2 repeats)
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """The options shared by ``python -m benchmarks`` and ``jaxgest bench``."""
-    parser.add_argument("--quick", action="store_true", help="fewer cases and repeats (< 2 minutes)")
-    parser.add_argument("--json", metavar="OUT", help="write machine info and the records (SPEC §8) here")
-    parser.add_argument("--plot", metavar="OUT.png", help="PNG of per-pose cost against clip length")
-    parser.add_argument("--cases", metavar="PATTERN", default=None,
-                        help="only these cases: comma-separated substrings or globs (e.g. 'peer_*,tgst_transfer')")
-    parser.add_argument("--repeats", type=int, default=None, help="timed repeats per implementation")
-    return parser
 
 
 def build_parser() -> argparse.ArgumentParser:

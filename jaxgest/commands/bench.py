@@ -7,6 +7,7 @@ current directory (a regular install run from a clone); otherwise the command fa
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import pathlib
 import sys
@@ -39,18 +40,23 @@ def find_benchmarks():
     return importlib.import_module("benchmarks.__main__")
 
 
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The options shared by ``jaxgest bench`` and ``python -m benchmarks`` (here, so that ``jaxgest --help``
+    works without the suite)."""
+    parser.add_argument("--quick", action="store_true", help="fewer cases and repeats (< 2 minutes)")
+    parser.add_argument("--json", metavar="OUT", help="write machine info and the records (SPEC §8) here")
+    parser.add_argument("--plot", metavar="OUT.png", help="PNG of per-pose cost against clip length")
+    parser.add_argument("--cases", metavar="PATTERN", default=None,
+                        help="only these cases: comma-separated substrings or globs (e.g. 'peer_*,tgst_transfer')")
+    parser.add_argument("--repeats", type=int, default=None, help="timed repeats per implementation")
+    return parser
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("bench", help="per-pose CPU cost benchmarks (JSON + markdown table)",
                               description="Per-pose CPU cost benchmarks (SPEC §8); the same as "
                                           "`python -m benchmarks` from a clone.")
-    # Kept identical to benchmarks.__main__.add_arguments (tests compare them); duplicated because the
-    # suite may be absent while `jaxgest --help` must still work.
-    p.add_argument("--quick", action="store_true", help="fewer cases and repeats (< 2 minutes)")
-    p.add_argument("--json", metavar="OUT", help="write machine info and the records (SPEC §8) here")
-    p.add_argument("--plot", metavar="OUT.png", help="PNG of per-pose cost against clip length")
-    p.add_argument("--cases", metavar="PATTERN", default=None,
-                   help="only these cases: comma-separated substrings or globs (e.g. 'peer_*,tgst_transfer')")
-    p.add_argument("--repeats", type=int, default=None, help="timed repeats per implementation")
+    add_arguments(p)
     p.set_defaults(func=_run)
 
 

@@ -203,3 +203,12 @@ def test_load_map_returns_a_private_copy():
     assert B.load_map("zeggs")["joints"]["Hips"] != "changed"
     sk = B.body_skeleton()
     assert B.joint_indices(sk, B.HANDS) == [sk.index("Hand_L"), sk.index("Hand_R")]
+
+
+def test_memoised_rig_data_is_read_only():
+    """The shared body skeleton and T-pose cannot be changed by one caller for every other."""
+    sk = B.body_skeleton()
+    for a in (sk.offsets, sk.parents, B.tpose_globals("bandai_namco")):
+        with pytest.raises(ValueError, match="read-only"):
+            a[0] = 0
+    assert B.body_tpose().flags.writeable  # derived arrays are the caller's own

@@ -95,13 +95,19 @@ def body_skeleton() -> Skeleton:
     """The canonical 21-joint body (Bandai-Namco rig without its static ``joint_Root``), root = Hips.
 
     Y-up, centimetres, bones along each joint's local X (left) / -X (right) like the dataset's rig.
+    Memoised and shared: its arrays are read-only.
     """
     s = load_map("bandai_namco")["body_skeleton"]
     names = tuple(s["names"])
-    ends = {names.index(k): np.asarray(v, np.float64) for k, v in s["end_sites"].items()}
-    return Skeleton(names=names, parents=np.asarray(s["parents"]),
-                    offsets=np.asarray(s["offsets"], np.float64),
+    ends = {names.index(k): _read_only(np.asarray(v, np.float64)) for k, v in s["end_sites"].items()}
+    return Skeleton(names=names, parents=_read_only(np.asarray(s["parents"])),
+                    offsets=_read_only(np.asarray(s["offsets"], np.float64)),
                     end_sites=ends, up_axis=int(s["up_axis"]))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
 
 
 @functools.lru_cache(maxsize=16)
@@ -110,17 +116,18 @@ def tpose_globals(map_name: str, skeleton: Optional[Skeleton] = None) -> np.ndar
 
     ``bandai_namco``: the body skeleton's T-pose from the map's ``tpose_axes`` (``skeleton`` ignored).
     Maps with ``"tpose": "rest"``: the rig's rest pose (identity local rotations) of ``skeleton``.
+    The array is memoised per (map, skeleton) and shared, so it is read-only (copy it to change it).
     """
     jm = load_map(map_name)
     if "tpose_axes" in jm:
         sk = body_skeleton()
-        return np.stack([RT.axes_to_quat(jm["tpose_axes"][n]) for n in sk.names])
+        return _read_only(np.stack([RT.axes_to_quat(jm["tpose_axes"][n]) for n in sk.names]))
     if jm.get("tpose") == "rest":
         if skeleton is None:
             raise ValueError(f"joint map {map_name!r} needs the rig's skeleton for its rest T-pose")
         ident = np.zeros((skeleton.num_joints, 4))
         ident[:, 0] = 1.0
-        return K.global_rotations(Motion(skeleton, ident[None], skeleton.offsets[None], 1.0))[0]
+        return _read_only(K.global_rotations(Motion(skeleton, ident[None], skeleton.offsets[None], 1.0))[0])
     raise DataError(f"joint map {map_name!r} defines no T-pose (tpose_axes or \"tpose\": \"rest\")")
 
 

@@ -41,7 +41,7 @@ def select(cases: list, pattern: str | None) -> list:
 
 def run(args) -> tuple[dict, int]:
     """Run the suite for parsed ``args``; returns the JSON document and the exit status."""
-    from benchmarks import harness, report
+    from benchmarks import harness, machine, report
     from benchmarks.cases import all_cases
     from jaxgest.errors import JaxgestError
     from jaxgest.io import check_output_path, write_text_atomic
@@ -59,8 +59,8 @@ def run(args) -> tuple[dict, int]:
         raise JaxgestError(f"no benchmark case matches {args.cases!r}")
     if importlib.util.find_spec("torch") is None:
         print("torch not installed: PyTorch peers skipped", flush=True)
-    probe = harness.probe_machine(1.0)
-    info = harness.machine_info()
+    probe = machine.probe_machine(1.0)
+    info = machine.machine_info(probe)
     repeats = args.repeats or (QUICK_REPEATS if args.quick else FULL_REPEATS)
     budget = QUICK_BUDGET_S if args.quick else FULL_BUDGET_S
     print(f"# jaxgest benchmarks on {info['cpu']} ({info['cores']} cores), jax {info['jax']}, "
@@ -72,7 +72,7 @@ def run(args) -> tuple[dict, int]:
     records, failures = [], []
     for case in cases:
         try:
-            records.extend(harness.run_case(case, repeats=repeats, budget_s=budget,
+            records.extend(harness.run_case(case, repeats=repeats, budget_s=budget, probe=probe,
                                             log=lambda s: print(s, flush=True)))
         except harness.EqualityError as e:
             print(f"  {case.name}: NOT TIMED, implementations disagree: {e}", flush=True)

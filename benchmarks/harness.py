@@ -39,14 +39,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
-import platform
 import statistics
 import time
 from typing import Any, Callable, Optional, Sequence
 
 import jax
 import numpy as np
+
+from benchmarks.machine import floor
 
 # The SPEC §8 record (key -> allowed JSON types), and the extra fields this harness adds.
 RECORD_FIELDS: dict[str, tuple] = {
@@ -320,8 +320,11 @@ def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repea
 
 
 def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = None, check: bool = True,
-             budget_s: float = 20.0, log: Callable[[str], None] = print) -> list[dict]:
+             budget_s: float = 20.0, log: Callable[[str], None] = print, probe: Optional[dict] = None) -> list[dict]:
     """Prepare every implementation (compile, one call), check they agree, then time each; one record each.
+
+    ``probe``: this run's :func:`benchmarks.machine.probe_machine`, for each record's floor fraction (nulls
+    without one).
 
     Raises :class:`EqualityError` (before any steady-state timing) when an implementation disagrees.
     """
@@ -363,7 +366,7 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
         if case.work is not None:
             flops, nbytes = case.work(impl.name)
             rec.update(flops=float(flops), bytes=float(nbytes))
-            rec.update(floor(flops, nbytes, rec["median_us"] * 1e-6, _PROBE))
+            rec.update(floor(flops, nbytes, rec["median_us"] * 1e-6, probe))
         log(f"  {case.name:<28} {impl.name:<6} {rec['median_us'] / 1e3:10.3f} ms/call "
             f"{rec['per_pose_us']:10.4f} us/pose  compile {rec['compile_s'] or 0:5.2f} s  x{rec['repeats']}")
         records.append(rec)
@@ -405,59 +408,6 @@ def time_interleaved(prepared: dict, *, repeats: int, warmup: int = 2, min_repea
     return out
 
 
-# The machine probe of this run (set by :func:`probe_machine`): GEMM GFLOP/s and memory GB/s.
-_PROBE: dict = {}
-
-
-def probe_machine(seconds: float = 1.0, *, gemm_n: int = 1024, stream_mb: int = 128) -> dict:
-    """Peak float32 GEMM rate and memory read bandwidth of the moment, ~``seconds`` in total (XLA, all cores).
-
-    GEMM: a jitted ``gemm_n`` x ``gemm_n`` float32 matmul, repeated for half the time, best call ->
-    ``gemm_gflops`` (2 n^3 / s). Bandwidth: a jitted matrix-vector product over a ``stream_mb`` MB float32
-    matrix (too large for any cache; the access pattern of batch-1 generation), repeated for the other
-    half, best call -> ``mem_gbps`` (matrix bytes / s; XLA CPU's plain reductions stream slower than its
-    dot). The best call of a short window is what the machine could give then; on a shared machine both
-    move with the load.
-    """
-    import jax.numpy as jnp
-
-    a = jnp.asarray(np.random.default_rng(0).normal(size=(gemm_n, gemm_n)), jnp.float32)
-    mm = jax.jit(lambda x, y: x @ y).lower(a, a).compile()
-    x = jnp.ones((stream_mb * 2**20 // 4 // 4096, 4096), jnp.float32)
-    v = jnp.ones((1, x.shape[0]), jnp.float32)
-    mv = jax.jit(lambda v, x: v @ x).lower(v, x).compile()
-
-    def best(f, budget):
-        jax.block_until_ready(f())
-        out, t_end = [], time.perf_counter() + budget
-        while time.perf_counter() < t_end or len(out) < 3:
-            t = time.perf_counter()
-            jax.block_until_ready(f())
-            out.append(time.perf_counter() - t)
-        return min(out)
-
-    t0 = time.perf_counter()
-    gemm = 2.0 * gemm_n ** 3 / best(lambda: mm(a, a), seconds / 2) / 1e9
-    bw = x.size * 4 / best(lambda: mv(v, x), seconds / 2) / 1e9
-    _PROBE.clear()
-    _PROBE.update(gemm_gflops=gemm, mem_gbps=bw, probe_s=time.perf_counter() - t0,
-                  load_avg_1m=os.getloadavg()[0] if hasattr(os, "getloadavg") else None)
-    return dict(_PROBE)
-
-
-def floor(flops: float, nbytes: float, seconds: float, probe: dict) -> dict:
-    """The compute / memory floor of a call: ``{"floor_bound", "floor_fraction"}``.
-
-    floor = max(flops / GEMM peak, bytes / bandwidth) of the probe; fraction = floor / measured time (1 =
-    at the machine's limit; nulls without a probe).
-    """
-    if not probe or seconds <= 0:
-        return {"floor_bound": None, "floor_fraction": None}
-    t_c = flops / (probe["gemm_gflops"] * 1e9)
-    t_m = nbytes / (probe["mem_gbps"] * 1e9)
-    return {"floor_bound": "compute" if t_c >= t_m else "memory", "floor_fraction": max(t_c, t_m) / seconds}
-
-
 def _check_fields(obj: dict, fields: dict, required: bool, what: str) -> None:
     for key, types in fields.items():
         if key not in obj:
@@ -494,55 +444,3 @@ def validate_document(doc: dict) -> None:
     for key in ("cpu", "cores", "jax", "jaxlib", "xla_flags"):
         if key not in doc["machine"]:
             raise ValueError(f"document machine info misses {key!r}")
-
-
-def machine_info() -> dict:
-    """CPU model, core count, versions and XLA flags: the context a number needs."""
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    import jaxlib
-
-    try:
-        affinity = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        affinity = None
-    return {
-        "cpu": cpu,
-        "cores": os.cpu_count(),
-        "cores_usable": affinity,
-        "python": platform.python_version(),
-        "jax": jax.__version__,
-        "jaxlib": jaxlib.__version__,
-        "numpy": np.__version__,
-        "backend": jax.default_backend(),
-        "devices": jax.device_count(),
-        "xla_flags": os.environ.get("XLA_FLAGS", ""),
-        # Thread settings of the NumPy BLAS; load average: other processes on the machine make every
-        # number noisier (a 1-minute load above the core count means the timings are shared).
-        "thread_env": {k: os.environ[k] for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-                       if k in os.environ},
-        "load_avg_1m": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
-        "persistent_compilation_cache": bool(jax.config.jax_enable_compilation_cache
-                                             and jax.config.jax_compilation_cache_dir),
-        # XLA's CPU client runs one intra-op thread pool over every core the process may use
-        "xla_cpu_threads": affinity or os.cpu_count(),
-        "torch": _torch_info(),
-        "probe": dict(_PROBE) or None,
-    }
-
-
-def _torch_info() -> Optional[dict]:
-    """torch version and intra-op threads when the suite imported torch (the PyTorch peers), else None."""
-    import sys
-
-    torch = sys.modules.get("torch")
-    if torch is None:
-        return None
-    return {"version": torch.__version__, "threads": torch.get_num_threads()}

@@ -12,8 +12,8 @@ newer ``format_version`` (:data:`FORMAT_VERSION`; absent = 1) or naming an unkno
 (:func:`check_workdir_config`).
 
 No process-wide side effects: absl logging is quietened only around the orbax calls that log expected
-noise (:func:`_quiet_absl`), and the filter of asyncio's "Event loop is closed" errors
-(:func:`closed_loop_errors_muted`) is installed while a Checkpointer is open and removed by
+noise (:func:`jaxgest.orbax_noise.quiet_absl`), and the filter of asyncio's "Event loop is closed" errors
+(:func:`jaxgest.orbax_noise.closed_loop_errors_muted`) is installed while a Checkpointer is open and removed by
 :meth:`Checkpointer.close` (the command line installs it for the whole command, see :mod:`jaxgest.cli`).
 
 References: STYLE.md (flax examples' orbax usage).
@@ -27,7 +27,6 @@ import json
 import logging
 import pathlib
 import sys
-import threading
 import time
 from typing import Any, Callable, Iterable, Mapping, Optional
 
@@ -36,6 +35,7 @@ import numpy as np
 
 from jaxgest.errors import CheckpointError, WriteError
 from jaxgest.io import json_default
+from jaxgest.orbax_noise import closed_loop_errors_muted, quiet_absl
 
 __all__ = [
     "Checkpointer",
@@ -43,8 +43,6 @@ __all__ = [
     "MODELS",
     "all_finite",
     "check_workdir_config",
-    "closed_loop_errors_muted",
-    "mute_closed_loop_errors_for_process",
     "config_diff",
     "strict_checkpoints",
     "warn",
@@ -91,76 +89,6 @@ def strict_checkpoints(strict: bool = True):
 def warn(message: str) -> None:
     """One ``jaxgest: warning: ...`` line on stderr (a fault that was handled; the command goes on)."""
     print(f"jaxgest: warning: {message}", file=sys.stderr, flush=True)
-
-
-@contextlib.contextmanager
-def _quiet_absl(level=logging.CRITICAL):
-    """orbax logs through absl (read-only option adjustments, missing optional metadata files, and the errors
-    it then raises); those are expected or reported by us in one line, so they are not shown."""
-    logger = logging.getLogger("absl")
-    old = logger.level
-    logger.setLevel(max(level, old))
-    try:
-        yield
-    finally:
-        logger.setLevel(old)
-
-
-_MUTE_LOCK = threading.Lock()
-_MUTE_DEPTH = 0  # how many closed_loop_errors_muted() contexts are open
-_MUTE_PREVIOUS = None  # the hook that was installed before the first of them
-
-
-def _closed_loop_hook(unraisable):
-    exc = unraisable.exc_value
-    if isinstance(exc, RuntimeError) and str(exc) == "Event loop is closed":
-        return
-    (_MUTE_PREVIOUS or sys.__unraisablehook__)(unraisable)
-
-
-def _mute_enter() -> None:
-    global _MUTE_DEPTH, _MUTE_PREVIOUS
-    with _MUTE_LOCK:
-        if _MUTE_DEPTH == 0:
-            _MUTE_PREVIOUS = sys.unraisablehook
-            sys.unraisablehook = _closed_loop_hook
-        _MUTE_DEPTH += 1
-
-
-def _mute_exit() -> None:
-    global _MUTE_DEPTH, _MUTE_PREVIOUS
-    with _MUTE_LOCK:
-        _MUTE_DEPTH -= 1
-        if _MUTE_DEPTH == 0:
-            if sys.unraisablehook is _closed_loop_hook:
-                sys.unraisablehook = _MUTE_PREVIOUS
-            _MUTE_PREVIOUS = None
-
-
-@contextlib.contextmanager
-def closed_loop_errors_muted():
-    """Within this context, drop the "RuntimeError: Event loop is closed" tracebacks (and only those) that
-    ``sys.unraisablehook`` would print.
-
-    When orbax gives up on a damaged checkpoint (or a failed save), tensorstore still completes the
-    outstanding reads/writes and their callbacks hit orbax's already closed asyncio loop: each prints such a
-    traceback (while orbax gives up, or later). Every other unraisable error goes to the previous hook.
-    Reentrant: the hook is installed by the outermost context and the previous one restored when it ends
-    (if nobody replaced it meanwhile). A :class:`Checkpointer` holds one open from construction to
-    :meth:`~Checkpointer.close`.
-    """
-    _mute_enter()
-    try:
-        yield
-    finally:
-        _mute_exit()
-
-
-def mute_closed_loop_errors_for_process() -> None:
-    """The filter of :func:`closed_loop_errors_muted` for the rest of the process: for an application's entry
-    point only (``jaxgest.cli.main``), where such callbacks can still fire at interpreter exit. Library code
-    uses the context manager."""
-    _mute_enter()
 
 
 class _Unreadable(Exception):
@@ -301,7 +229,7 @@ class Checkpointer:
         self._muted = contextlib.ExitStack()
         self._muted.enter_context(closed_loop_errors_muted())
         try:
-            with _quiet_absl(logging.ERROR):  # read-only: expected warnings about the options orbax adjusts
+            with quiet_absl(logging.ERROR):  # read-only: expected warnings about the options orbax adjusts
                 options = ocp.CheckpointManagerOptions(
                     max_to_keep=max(int(max_to_keep), 1),
                     create=not read_only,
@@ -330,7 +258,7 @@ class Checkpointer:
 
     def _read_meta(self, step: int) -> dict:
         try:
-            with _quiet_absl():
+            with quiet_absl():
                 restored = self.manager.restore(
                     step, args=self._ocp.args.Composite(meta=self._ocp.args.JsonRestore()))
             meta = restored["meta"]
@@ -411,7 +339,7 @@ class Checkpointer:
         if digest is not None:
             meta["sha256"] = digest
         try:
-            with _quiet_absl():
+            with quiet_absl():
                 self.manager.save(
                     step,
                     args=self._ocp.args.Composite(
@@ -440,7 +368,7 @@ class Checkpointer:
         except ImportError:  # another orbax layout: wait for every non-daemon helper thread instead
             orbax_thread = threading.Thread
         deadline = time.monotonic() + timeout
-        with _quiet_absl():
+        with quiet_absl():
             for t in threading.enumerate():
                 if t is not threading.current_thread() and isinstance(t, orbax_thread) and t.is_alive():
                     t.join(max(deadline - time.monotonic(), 0.0))
@@ -464,7 +392,7 @@ class Checkpointer:
         if final.is_dir() and not (final / "_CHECKPOINT_METADATA").is_file():
             shutil.rmtree(final, ignore_errors=True)
         try:
-            with _quiet_absl():
+            with quiet_absl():
                 self.manager.reload()
         except Exception:  # noqa: BLE001
             pass
@@ -510,7 +438,7 @@ class Checkpointer:
             warn(f"{what}; using step {used} instead (nothing was changed; --strict refuses)")
             return
         moved = [self._set_aside(s) for s, _ in bad]
-        with _quiet_absl():
+        with quiet_absl():
             self.manager.reload()
         warn(f"{what}; resuming from step {used} (moved to {', '.join(moved)}; nothing was deleted)")
 
@@ -543,7 +471,7 @@ class Checkpointer:
         args = (self._ocp.args.StandardRestore(abstract) if abstract is not None else
                 self._ocp.args.StandardRestore())
         try:
-            with _quiet_absl():
+            with quiet_absl():
                 restored = self.manager.restore(step, args=self._ocp.args.Composite(state=args))["state"]
         except MemoryError:
             raise
@@ -563,7 +491,7 @@ class Checkpointer:
     def _structure_mismatch(self, step: int, abstract) -> Optional[str]:
         """How the stored tree differs from ``abstract`` (None: it does not, or its metadata is damaged)."""
         try:
-            with _quiet_absl():
+            with quiet_absl():
                 md = self._ocp.StandardCheckpointer().metadata(self.directory / str(step) / "state")
             stored = _shapes(getattr(md, "item_metadata", md))
         except Exception:  # noqa: BLE001

@@ -7,7 +7,7 @@ status 2. Every command that reads a workdir gets ``--strict`` (refuse an unread
 falling back to an older one).
 
 The command owns its process, so it (and only it) installs the process-wide filter of asyncio's "Event loop
-is closed" noise (:func:`jaxgest.checkpoint.mute_closed_loop_errors_for_process`); library code scopes it.
+is closed" noise (:func:`jaxgest.orbax_noise.mute_closed_loop_errors_for_process`); library code scopes it.
 
 Progress bars (tqdm, drawn on stderr) are shown only when stderr is a terminal: when it is a file or a
 pipe, the bars' carriage-return redraws are dropped, so a failed command's stderr is exactly its one-line
@@ -155,7 +155,8 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    from jaxgest.checkpoint import mute_closed_loop_errors_for_process, strict_checkpoints
+    from jaxgest.checkpoint import strict_checkpoints
+    from jaxgest.orbax_noise import mute_closed_loop_errors_for_process
 
     # the command owns the process: asyncio "Event loop is closed" noise of a damaged checkpoint's reads can
     # still surface at interpreter exit, after every Checkpointer is closed

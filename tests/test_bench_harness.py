@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from benchmarks import __main__ as bench_main
-from benchmarks import harness, report
+from benchmarks import harness, machine, report
 from benchmarks.cases import case_modules
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -123,7 +123,7 @@ def test_record_schema_is_validated():
     del missing["per_pose_us"]
     with pytest.raises(ValueError, match="misses 'per_pose_us'"):
         harness.validate_record(missing)
-    doc = {"machine": harness.machine_info(), "quick": True, "wall_s": 1.0, "records": [_record()],
+    doc = {"machine": machine.machine_info(), "quick": True, "wall_s": 1.0, "records": [_record()],
            "ratios": {}, "failures": []}
     harness.validate_document(json.loads(json.dumps(doc)))
     with pytest.raises(ValueError, match="records"):
@@ -203,11 +203,11 @@ def test_interleaved_rounds_time_each_impl_and_floor_fractions():
     assert [r["impl"] for r in recs] == ["slow", "fast"] and all(r["interleaved"] for r in recs)
     assert recs[0]["repeats"] == recs[1]["repeats"] == 3
     assert 8_000 <= recs[0]["median_us"] <= 60_000 and recs[1]["median_us"] < 1_000
-    probe = harness.probe_machine(0.2, gemm_n=256, stream_mb=32)
+    probe = machine.probe_machine(0.2, gemm_n=256, stream_mb=32)
     assert probe["gemm_gflops"] > 0.1 and probe["mem_gbps"] > 0.1
-    f = harness.floor(2e9, 1e6, 1.0, {"gemm_gflops": 4.0, "mem_gbps": 10.0})
+    f = machine.floor(2e9, 1e6, 1.0, {"gemm_gflops": 4.0, "mem_gbps": 10.0})
     assert f == {"floor_bound": "compute", "floor_fraction": pytest.approx(0.5)}
-    f = harness.floor(1e6, 1e10, 2.0, {"gemm_gflops": 4.0, "mem_gbps": 10.0})
+    f = machine.floor(1e6, 1e10, 2.0, {"gemm_gflops": 4.0, "mem_gbps": 10.0})
     assert f["floor_bound"] == "memory" and f["floor_fraction"] == pytest.approx(0.5)
     for r in recs:
         harness.validate_record(r)

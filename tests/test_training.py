@@ -111,22 +111,22 @@ def test_checkpointer_has_no_process_wide_side_effects(tmp_path, monkeypatch):
     import logging
     import sys
 
-    from jaxgest import checkpoint
+    from jaxgest import orbax_noise
 
     def hook(unraisable):  # stands for whatever the process had installed
         pass
 
-    monkeypatch.setattr(checkpoint, "_MUTE_DEPTH", 0)
+    monkeypatch.setattr(orbax_noise, "_MUTE_DEPTH", 0)
     monkeypatch.setattr(sys, "unraisablehook", hook)
     level = logging.getLogger("absl").level
     ck = Checkpointer(tmp_path, kind="toy", config={"lr": 0.1})
-    assert sys.unraisablehook is checkpoint._closed_loop_hook  # installed while open
+    assert sys.unraisablehook is orbax_noise._closed_loop_hook  # installed while open
     with Checkpointer(tmp_path, kind="toy", config={"lr": 0.1}, read_only=True) as ro:  # nested: one filter
         assert ro.latest_step() is None
-    assert sys.unraisablehook is checkpoint._closed_loop_hook
+    assert sys.unraisablehook is orbax_noise._closed_loop_hook
     ck.close()
     assert sys.unraisablehook is hook and logging.getLogger("absl").level == level
-    with checkpoint.closed_loop_errors_muted():
+    with orbax_noise.closed_loop_errors_muted():
         seen = []
         sys.unraisablehook = seen.append  # someone else replaces it meanwhile
     assert sys.unraisablehook == seen.append  # not clobbered on exit

@@ -57,7 +57,6 @@ def make_variant(cfg: ModelConfig, *, hoist: bool, fused: bool, unroll: int = 1,
     """``generate(params, speech, style, pose0, root_position0, root_rotation0, facing) -> dict``."""
     P = cfg.pose_dim
     n_pf = P + cfg.facing_dim  # per-frame inputs that depend on the recurrence: [pose, local facing]
-    n_sp = cfg.speech_embedding
     mean, std = jnp.zeros((P,)), jnp.ones((P,))
 
     def generate(params, speech, style, pose0, root_position0, root_rotation0, facing):

@@ -1,0 +1,86 @@
+"""Expected noise of orbax / tensorstore, silenced only where it is expected.
+
+* :func:`quiet_absl`: absl logging raised to CRITICAL around orbax calls that log expected messages;
+* :func:`closed_loop_errors_muted`: drops the "RuntimeError: Event loop is closed" unraisable errors that
+  tensorstore callbacks raise after orbax gives up on a damaged checkpoint (reentrant, restores the
+  previous ``sys.unraisablehook``); :func:`mute_closed_loop_errors_for_process` for an entry point.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import sys
+import threading
+
+__all__ = ["quiet_absl", "closed_loop_errors_muted", "mute_closed_loop_errors_for_process"]
+
+
+@contextlib.contextmanager
+def quiet_absl(level=logging.CRITICAL):
+    """orbax logs through absl (read-only option adjustments, missing optional metadata files, and the errors
+    it then raises); those are expected or reported by us in one line, so they are not shown."""
+    logger = logging.getLogger("absl")
+    old = logger.level
+    logger.setLevel(max(level, old))
+    try:
+        yield
+    finally:
+        logger.setLevel(old)
+
+
+_MUTE_LOCK = threading.Lock()
+_MUTE_DEPTH = 0  # how many closed_loop_errors_muted() contexts are open
+_MUTE_PREVIOUS = None  # the hook that was installed before the first of them
+
+
+def _closed_loop_hook(unraisable):
+    exc = unraisable.exc_value
+    if isinstance(exc, RuntimeError) and str(exc) == "Event loop is closed":
+        return
+    (_MUTE_PREVIOUS or sys.__unraisablehook__)(unraisable)
+
+
+def _mute_enter() -> None:
+    global _MUTE_DEPTH, _MUTE_PREVIOUS
+    with _MUTE_LOCK:
+        if _MUTE_DEPTH == 0:
+            _MUTE_PREVIOUS = sys.unraisablehook
+            sys.unraisablehook = _closed_loop_hook
+        _MUTE_DEPTH += 1
+
+
+def _mute_exit() -> None:
+    global _MUTE_DEPTH, _MUTE_PREVIOUS
+    with _MUTE_LOCK:
+        _MUTE_DEPTH -= 1
+        if _MUTE_DEPTH == 0:
+            if sys.unraisablehook is _closed_loop_hook:
+                sys.unraisablehook = _MUTE_PREVIOUS
+            _MUTE_PREVIOUS = None
+
+
+@contextlib.contextmanager
+def closed_loop_errors_muted():
+    """Within this context, drop the "RuntimeError: Event loop is closed" tracebacks (and only those) that
+    ``sys.unraisablehook`` would print.
+
+    When orbax gives up on a damaged checkpoint (or a failed save), tensorstore still completes the
+    outstanding reads/writes and their callbacks hit orbax's already closed asyncio loop: each prints such a
+    traceback (while orbax gives up, or later). Every other unraisable error goes to the previous hook.
+    Reentrant: the hook is installed by the outermost context and the previous one restored when it ends
+    (if nobody replaced it meanwhile). A :class:`Checkpointer` holds one open from construction to
+    :meth:`~Checkpointer.close`.
+    """
+    _mute_enter()
+    try:
+        yield
+    finally:
+        _mute_exit()
+
+
+def mute_closed_loop_errors_for_process() -> None:
+    """The filter of :func:`closed_loop_errors_muted` for the rest of the process: for an application's entry
+    point only (``jaxgest.cli.main``), where such callbacks can still fire at interpreter exit. Library code
+    uses the context manager."""
+    _mute_enter()

@@ -41,6 +41,7 @@ __all__ = [
     "Checkpointer",
     "FORMAT_VERSION",
     "MODELS",
+    "ModelCache",
     "all_finite",
     "check_workdir_config",
     "config_diff",
@@ -624,3 +625,32 @@ def all_finite(tree) -> jax.Array:
     leaves = [jax.numpy.all(jax.numpy.isfinite(x)) for x in jax.tree_util.tree_leaves(tree)
               if jax.numpy.issubdtype(x.dtype, jax.numpy.inexact)]
     return jax.numpy.all(jax.numpy.stack(leaves)) if leaves else jax.numpy.bool_(True)
+
+
+class ModelCache:
+    """An explicit cache of models loaded from workdirs, reloaded when a workdir's checkpoints change.
+
+    ``load(workdir)`` loads a model; ``version(workdir)`` is a cheap, hashable description of the workdir's
+    checkpoints (a directory listing, no arrays read). ``get(workdir)`` returns the cached model while the
+    version is unchanged and loads again otherwise (dropping that workdir's older versions); at most
+    ``maxsize`` models are kept, least recently used dropped first. Owned by its caller.
+    """
+
+    def __init__(self, load: Callable[[Any], Any], version: Callable[[Any], Any], maxsize: int):
+        self._load, self._version, self.maxsize = load, version, int(maxsize)
+        self._models: dict = {}
+
+    def get(self, workdir):
+        path = str(pathlib.Path(workdir).resolve())
+        key = (path, self._version(workdir))
+        model = self._models.pop(key, None)
+        if model is None:
+            model = self._load(workdir)
+            self._models = {k: v for k, v in self._models.items() if k[0] != path}  # its older versions
+        self._models[key] = model  # most recently used last
+        while len(self._models) > self.maxsize:
+            self._models.pop(next(iter(self._models)))
+        return model
+
+    def clear(self) -> None:
+        self._models.clear()

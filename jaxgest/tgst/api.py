@@ -33,6 +33,7 @@ from typing import Optional
 import jax
 import numpy as np
 
+from jaxgest import checkpoint
 from jaxgest.errors import DataError
 from jaxgest.motion import body, datasets
 from jaxgest.motion import kinematics as K
@@ -179,29 +180,12 @@ def load_model(workdir) -> TGSTModel:
     return TGSTModel(config.model, params, workdir, config=config, steps=steps)
 
 
-class ModelCache:
-    """An explicit cache of loaded models, keyed on the workdir and the checkpoint step of both stages.
+class ModelCache(checkpoint.ModelCache):
+    """Loaded TGST models (:class:`jaxgest.checkpoint.ModelCache`), keyed on the workdir and the checkpoint
+    steps of both stages: a stage with a newer (or other) step is reloaded, an unchanged workdir is not."""
 
-    ``cache.get(workdir)`` lists the checkpoint steps (no arrays are read) and restores only when a stage has
-    a newer (or other) step than the cached model, so a workdir retrained meanwhile is reloaded and an
-    unchanged one is not. Owned by its caller (no module-level state); holds at most ``size`` models.
-    """
-
-    def __init__(self, size: int = 4):
-        self.size = int(size)
-        self._models: dict = {}
-
-    def get(self, workdir) -> TGSTModel:
-        path = pathlib.Path(workdir).resolve()
-        key = (str(path), _checkpoint_steps(workdir))
-        model = self._models.pop(key, None)
-        if model is None:
-            model = load_model(workdir)
-            self._models = {k: v for k, v in self._models.items() if k[0] != key[0]}  # older steps
-        self._models[key] = model  # most recently used last
-        while len(self._models) > self.size:
-            self._models.pop(next(iter(self._models)))
-        return model
+    def __init__(self, maxsize: int = 4):
+        super().__init__(load_model, _checkpoint_steps, maxsize)
 
 
 def _checkpoint_steps(workdir) -> tuple:

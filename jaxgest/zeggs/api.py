@@ -13,7 +13,6 @@ References: Ghorbani et al. 2023, §3 (zero-shot style from an example clip), §
 
 from __future__ import annotations
 
-import collections
 import os
 import pathlib
 from typing import Optional, Sequence, Union
@@ -21,6 +20,7 @@ from typing import Optional, Sequence, Union
 import jax
 import numpy as np
 
+from jaxgest import checkpoint
 from jaxgest.errors import JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.skeleton import Motion
@@ -50,39 +50,20 @@ def _as_motions(styles) -> list[Motion]:
     return out
 
 
-class ModelCache:
-    """Loaded models by workdir, reused while the workdir's newest checkpoint is the same.
-
-    The key is ``(resolved workdir, newest checkpoint step, that step folder's modification time)``: a run
-    that trains further (a new step) or is retrained into the same workdir (a rewritten step folder) is
-    loaded again. At most ``maxsize`` models are kept (least recently used dropped). ``clear()`` empties it.
-    """
+class ModelCache(checkpoint.ModelCache):
+    """Loaded ZeroEGGS models (:class:`jaxgest.checkpoint.ModelCache`), keyed on the workdir, its newest
+    checkpoint step and that step folder's modification time: a run that trains further (a new step) or is
+    retrained into the same workdir (a rewritten step folder) is loaded again."""
 
     def __init__(self, maxsize: int = 2):
-        self.maxsize = int(maxsize)
-        self._models: collections.OrderedDict = collections.OrderedDict()
+        super().__init__(load_model, _newest_checkpoint, maxsize)
 
-    @staticmethod
-    def key(workdir) -> tuple:
-        workdir = pathlib.Path(workdir).resolve()
-        step = latest_step(workdir)
-        folder = workdir / CKPT_SUBDIR / str(step)
-        return str(workdir), step, folder.stat().st_mtime_ns if step is not None else None
 
-    def get(self, workdir) -> TrainedZeggs:
-        """The model of ``workdir``: cached, or loaded (:func:`load_model`) and cached."""
-        k = self.key(workdir)
-        if k in self._models:
-            self._models.move_to_end(k)
-            return self._models[k]
-        model = load_model(workdir)
-        self._models[k] = model
-        while len(self._models) > self.maxsize:
-            self._models.popitem(last=False)
-        return model
-
-    def clear(self) -> None:
-        self._models.clear()
+def _newest_checkpoint(workdir) -> tuple:
+    workdir = pathlib.Path(workdir).resolve()
+    step = latest_step(workdir)
+    folder = workdir / CKPT_SUBDIR / str(step)
+    return step, folder.stat().st_mtime_ns if step is not None else None
 
 
 MODEL_CACHE = ModelCache()  # what generate() uses by default

@@ -2,56 +2,121 @@
 
 from __future__ import annotations
 
+import types
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from jaxgest.zeggs import quant as Q
 
 
-def test_int8_per_channel_quantisation_error_is_within_half_a_step():
-    w = jnp.asarray(np.random.default_rng(0).normal(size=(50, 7)) * np.arange(1, 8), jnp.float32)
-    qk = Q.quantize_kernel(w, "int8")
-    assert qk["w"].dtype == jnp.int8 and qk["scale"].shape == (7,)
-    np.testing.assert_allclose(np.asarray(qk["scale"]), np.max(np.abs(np.asarray(w)), 0) / 127, rtol=1e-6)
-    err = np.abs(np.asarray(Q.dequantize(qk)) - np.asarray(w))
-    assert np.all(err <= np.asarray(qk["scale"])[None] / 2 + 1e-7)
-    assert Q.quantize_kernel(w, "bf16")["w"].dtype == jnp.bfloat16
+@settings(max_examples=30, deadline=None)
+@given(n_in=st.integers(1, 80), n_out=st.integers(1, 6), group=st.sampled_from([0, 1, 7, 32, 200]),
+       seed=st.integers(0, 2 ** 16))
+def test_int8_groups_are_within_a_step_and_keep_their_sums(n_in, n_out, group, seed):
+    rng = np.random.default_rng(seed)
+    w = (rng.normal(size=(n_in, n_out)) * rng.uniform(0.1, 3.0, size=n_out)).astype(np.float32)
+    qk = Q.quantize_kernel(w, "int8", group=group)
+    g = qk.group
+    assert qk.w.dtype == jnp.int8 and qk.shape == (n_in, n_out) and g == (min(group, n_in) if group else n_in)
+    n_groups = -(-n_in // g)
+    assert qk.scale.shape == (n_groups, n_out) and qk.w.shape == (n_groups * g, n_out)
+    scale = np.repeat(np.asarray(qk.scale, np.float64), g, axis=0)[:n_in]
+    q = np.asarray(qk.w, np.float64)
+    deq = (q.reshape(n_groups, g, n_out) * np.asarray(qk.scale)[:, None]).reshape(-1, n_out)[:n_in]
+    err = deq - w
+    assert np.all(np.abs(err) <= scale * (1 + 1e-5))  # at most one step (a flipped rounding)
+    assert np.all(np.abs(np.asarray(qk.w)) <= 127)
+    pad = n_groups * g - n_in
+    group_err = np.concatenate([err, np.zeros((pad, n_out))]).reshape(n_groups, g, n_out).sum(1)
+    assert np.all(np.abs(group_err) <= 0.5 * np.asarray(qk.scale) * (1 + 1e-4) + 1e-7)
+
+
+def test_formats_and_bad_format():
+    w = np.random.default_rng(0).normal(size=(50, 7)).astype(np.float32)
+    qk = Q.quantize_kernel(w, "int8", group=16)
+    assert np.max(np.abs(np.asarray(Q.dequantize(qk)) - w)) <= np.max(np.asarray(qk.scale)) * (1 + 1e-6)
+    assert Q.quantize_kernel(w, "bf16").w.dtype == jnp.bfloat16
+    assert isinstance(Q.quantize_kernel(w, "fp32"), jax.Array)
     with pytest.raises(ValueError, match="fp32|bf16|int8"):
         Q.quantize_kernel(w, "int4")
 
 
 @pytest.mark.parametrize("batch", [1, 8])
-def test_qdense_dequantises_in_the_product(batch):
+def test_dense_apply_dequantises_in_the_product(batch):
     rng = np.random.default_rng(batch)
     x = jnp.asarray(rng.normal(size=(batch, 33)), jnp.float32)
     w = jnp.asarray(rng.normal(size=(33, 12)), jnp.float32)
     b = jnp.asarray(rng.normal(size=12), jnp.float32)
     for fmt in Q.WEIGHT_FORMATS:
-        qk = Q.quantize_kernel(w, fmt)
+        qk = Q.quantize_kernel(w, fmt, group=8)
         want = np.asarray(x) @ np.asarray(Q.dequantize(qk), np.float64) + np.asarray(b)
         tol = 5e-2 if fmt == "bf16" else 1e-4  # the bf16 dot rounds x to bf16 as well
-        np.testing.assert_allclose(np.asarray(jax.jit(Q.qdense)(x, qk, b)), want, rtol=tol, atol=tol)
+        np.testing.assert_allclose(np.asarray(jax.jit(Q.dense_apply)(x, qk, b)), want, rtol=tol, atol=tol)
 
 
-def test_formats_of_the_generator():
+@pytest.fixture(scope="module")
+def tiny():
     from benchmarks.cases import zeggs as Z
     from jaxgest.zeggs.config import preset
 
     cfg = preset("tiny").model
-    params = Z.random_params(cfg, seed=3)
-    inputs = Z.generator_inputs(cfg, 1, 40, seed=3)
-    ref = jax.device_get(jax.jit(Z._generate_fn(cfg))(params, *inputs))
-    gen = jax.jit(Q.make_generate(cfg))
-    out = {f: jax.device_get(gen(Q.quantize_params(params, f), *inputs)) for f in Q.WEIGHT_FORMATS}
+    return cfg, Z.random_params(cfg, seed=3), Z.generator_inputs(cfg, 1, 40, seed=3), jax.jit(Z._generate_fn(cfg))
+
+
+def test_the_model_generates_every_format(tiny):
+    cfg, params, inputs, gen = tiny
+    ref = jax.device_get(gen(params, *inputs))
+    fp32 = Q.quantize_params(params, "fp32")
+    for a, b in zip(jax.tree_util.tree_leaves(fp32), jax.tree_util.tree_leaves(params)):
+        assert a.dtype == jnp.float32 and np.array_equal(np.asarray(a), np.asarray(b))
+    out = jax.device_get(gen(fp32, *inputs))
     for k in ref:
-        np.testing.assert_allclose(out["fp32"][k], ref[k], rtol=1e-5, atol=1e-5, err_msg=k)
-    for f in ("bf16", "int8"):
-        d = np.abs(out[f]["pose"] - ref["pose"])
-        assert 0 < d.max() < 0.1 and np.all(np.isfinite(out[f]["root_position"]))
+        np.testing.assert_array_equal(out[k], ref[k], err_msg=k)  # fp32 through the quantised path: the model
+    means = Q.calibrate(cfg, params, *inputs)
+    assert means["gru0"]["input"].shape == (params["generator"]["decoder"]["gru0"]["input"]["kernel"].shape[0],)
+    for fmt in ("bf16", "int8"):
+        for m in (None, means):
+            qp = Q.quantize_params(params, fmt, input_means=m)
+            d = np.abs(jax.device_get(gen(qp, *inputs))["pose"] - ref["pose"])
+            assert 0 < d.max() < 0.1, (fmt, m is None, d.max())
     qp = Q.quantize_params(params, "int8")
-    assert Q.weight_bytes(qp) < 0.3 * Q.weight_bytes(Q.quantize_params(params, "fp32"))
+    assert isinstance(qp["generator"]["decoder"]["output_layer"]["kernel"], Q.QuantKernel)
+    assert not isinstance(qp["generator"]["initializer"]["layer0"]["kernel"], Q.QuantKernel)
+    assert Q.weight_bytes(qp) < 0.35 * Q.weight_bytes(params)
+    wrong = jax.tree_util.tree_map(lambda a: a, qp)
+    k = wrong["generator"]["decoder"]["output_layer"]["kernel"]
+    wrong["generator"]["decoder"]["output_layer"]["kernel"] = k.replace(in_features=k.in_features - 1)
+    with pytest.raises(ValueError, match="output_layer: quantised kernel of shape"):
+        gen(wrong, *inputs)
+
+
+def test_int8_and_bf16_stay_within_one_percent_of_the_pose_range_after_600_frames():
+    """The stated accuracy bound on the ``small`` preset (GRU 2 x 128; random LeCun weights): RMS of the pose
+    difference against fp32 over 600 generated frames <= 1 % of the mean per-channel pose range, with the
+    bias correction calibrated on other inputs (another seed); a control: the same int8 kernels without the
+    correction are no better than with it."""
+    from benchmarks.cases import zeggs as Z
+    from jaxgest.zeggs.config import preset
+
+    cfg = preset("small").model
+    params = Z.random_params(cfg, seed=0)
+    gen = jax.jit(Z._generate_fn(cfg))
+    inputs = Z.generator_inputs(cfg, 1, 600, seed=0)
+    means = Q.calibrate(cfg, params, *Z.generator_inputs(cfg, 1, 200, seed=1))
+    ref = np.asarray(gen(params, *inputs)["pose"], np.float64)
+    pose_range = np.mean(ref.max(1) - ref.min(1))
+
+    def rms_pct(p):
+        return 100 * np.sqrt(np.mean((np.asarray(gen(p, *inputs)["pose"], np.float64) - ref) ** 2)) / pose_range
+
+    pct = {fmt: rms_pct(Q.quantize_params(params, fmt, input_means=means)) for fmt in ("bf16", "int8")}
+    assert 0 < pct["bf16"] <= 1.0 and 0 < pct["int8"] <= 1.0, pct
+    assert rms_pct(Q.quantize_params(params, "int8")) >= pct["int8"] * 0.9
 
 
 def test_inference_generate_takes_a_weight_format():
@@ -65,13 +130,16 @@ def test_inference_generate_takes_a_weight_format():
     cfg = full.model
     model = object.__new__(TrainedZeggs)  # the generation path only (no workdir)
     model.cfg, model.fns, model.quantized = full, apply_fns(cfg, full.inference.compiler_options), {}
+    model.speech_stats = types.SimpleNamespace(mean=np.zeros(cfg.speech_dim, np.float32))
+    model.pose_mean, model.pose_std = jnp.zeros(cfg.pose_dim), jnp.ones(cfg.pose_dim)
     params = Z.random_params(cfg, seed=4)
     s, e, y0, r0, q0, f = Z.generator_inputs(cfg, 1, 30, seed=4)
-    mean, std = jnp.zeros(cfg.pose_dim), jnp.ones(cfg.pose_dim)
+    mean, std = model.pose_mean, model.pose_std
     out = {fmt: model.run_generator(params, s, e, y0, r0, q0, f, mean, std, weight_format=fmt)
            for fmt in Q.WEIGHT_FORMATS}
     assert out["fp32"]["pose"].shape == (1, 31, cfg.pose_dim)
     for fmt in ("bf16", "int8"):
+        assert isinstance(model.quantized[fmt]["generator"]["decoder"]["gru1"]["hidden"]["kernel"], Q.QuantKernel)
         d = np.abs(np.asarray(out[fmt]["pose"]) - np.asarray(out["fp32"]["pose"]))
         assert 0 < d.max() < 0.1
     with pytest.raises(JaxgestError, match="weight format"):

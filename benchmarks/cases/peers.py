@@ -153,7 +153,7 @@ def _quantized(fmt: str):
 
 
 def _format_fn(fmt: str):
-    gen = jax.jit(Q.make_generate(Z.CFG))
+    gen = jax.jit(Z._generate_fn(Z.CFG))  # the model itself, on params whose decoder kernels are in ``fmt``
 
     def run(params, speech, style, pose0, root_position0, root_rotation0, facing):
         qp = _quantized(fmt) if params is Z._params() else Q.quantize_params(params, fmt)
@@ -221,8 +221,8 @@ def format_accuracy(frames: int = 600, batch: int = 1, seed: int = 0) -> dict:
     """
     cfg = Z.CFG
     args = Z.generator_inputs(cfg, batch, frames, seed=seed)
-    gen = jax.jit(Q.make_generate(cfg))
-    ref = np.asarray(jax.jit(Z._generate_fn(cfg))(Z._params(), *args)["pose"], np.float64)
+    gen = jax.jit(Z._generate_fn(cfg))
+    ref = np.asarray(gen(Z._params(), *args)["pose"], np.float64)
     rng = np.mean(ref.max(axis=1) - ref.min(axis=1))
     out = {}
 
@@ -236,7 +236,7 @@ def format_accuracy(frames: int = 600, batch: int = 1, seed: int = 0) -> dict:
     for fmt in Q.WEIGHT_FORMATS[1:]:
         out[fmt] = stats(gen(_quantized(fmt), *args)["pose"])
     moved = (args[0], args[1], args[2] + 1e-6) + tuple(args[3:])
-    out["control_fp32_pose0_plus_1e-6"] = stats(jax.jit(Z._generate_fn(cfg))(Z._params(), *moved)["pose"])
+    out["control_fp32_pose0_plus_1e-6"] = stats(gen(Z._params(), *moved)["pose"])
     out["pose_range"] = float(rng)
     out["frames"] = frames
     return out

@@ -32,8 +32,32 @@ import jax.numpy as jnp
 
 from jaxgest.motion import rotations
 from jaxgest.zeggs.config import ModelConfig
+from jaxgest.zeggs.quant import QuantKernel, dense_apply
 
 Carry = tuple[tuple[jax.Array, ...], jax.Array, jax.Array, jax.Array]
+
+
+class Dense(nn.Module):
+    """``nn.Dense`` (same parameters ``kernel (in, out)``, ``bias (out,)`` and initialisers) whose kernel may
+    also be a narrow :class:`jaxgest.zeggs.quant.QuantKernel` (weight formats, inference only): the product
+    is :func:`jaxgest.zeggs.quant.dense_apply` in both cases."""
+
+    features: int
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        shape = (x.shape[-1], self.features)
+        stored = self.get_variable("params", "kernel") if self.has_variable("params", "kernel") else None
+        if isinstance(stored, QuantKernel):
+            if stored.shape != shape:
+                raise ValueError(f"{self.name}: quantised kernel of shape {stored.shape}, expected {shape}")
+            kernel = stored
+        else:
+            kernel = self.param("kernel", nn.initializers.lecun_normal(), shape, jnp.float32)
+        bias = self.param("bias", nn.initializers.zeros_init(), (self.features,), jnp.float32)
+        if self.is_mutable_collection("calibration"):  # quant.calibrate: the mean input of every layer
+            self.sow("calibration", "input_mean", jnp.mean(x.reshape(-1, x.shape[-1]), axis=0))
+        return dense_apply(x, kernel, bias)
 
 
 class GRULayer(nn.Module):
@@ -47,8 +71,8 @@ class GRULayer(nn.Module):
     @nn.compact
     def __call__(self, h: jax.Array, x: jax.Array) -> jax.Array:
         H = self.features
-        gi = nn.Dense(3 * H, name="input")(x)
-        gh = nn.Dense(3 * H, name="hidden")(h)
+        gi = Dense(3 * H, name="input")(x)
+        gh = Dense(3 * H, name="hidden")(h)
         r = nn.sigmoid(gi[:, :H] + gh[:, :H])
         z = nn.sigmoid(gi[:, H:2 * H] + gh[:, H:2 * H])
         n = jnp.tanh(gi[:, 2 * H:] + r * gh[:, 2 * H:])
@@ -143,13 +167,13 @@ class RecurrentDecoder(nn.RNNCellBase):
         speech_t, style_t = inputs
         facing, pose_mean, pose_std, in_scale = consts
         x = jnp.concatenate([pose * in_scale[None], local_facing(facing, root_rot), speech_t, style_t], axis=-1)
-        h = nn.elu(nn.Dense(cfg.gru_hidden, name="input_layer")(x))
+        h = nn.elu(Dense(cfg.gru_hidden, name="input_layer")(x))
         h = jnp.concatenate([h, x], axis=-1)
         new_hidden = []
         for i in range(cfg.gru_layers):
             h = GRULayer(cfg.gru_hidden, name=f"gru{i}")(hidden[i], h)
             new_hidden.append(h)
-        y = nn.Dense(cfg.pose_dim, name="output_layer")(h)
+        y = Dense(cfg.pose_dim, name="output_layer")(h)
         pos, rot = update_character_state(y, root_pos, root_rot, cfg=cfg, pose_mean=pose_mean, pose_std=pose_std)
         return (tuple(new_hidden), y, pos, rot), (y, pos, rot)
 
@@ -200,7 +224,8 @@ class Generator(nn.Module):
 
     def setup(self):
         self.initializer = HiddenStateInitializer(self.cfg, name="initializer")
-        scan = nn.scan(RecurrentDecoder, variable_broadcast="params", split_rngs={"params": False},
+        scan = nn.scan(RecurrentDecoder, variable_broadcast="params", variable_axes={"calibration": 0},
+                       split_rngs={"params": False},
                        in_axes=(1, nn.broadcast), out_axes=1)
         self.decoder = scan(self.cfg, name="decoder")
 

@@ -78,7 +78,7 @@ class TrainedZeggs:
         self.pose_std = jnp.asarray(self.pose_stats.std, jnp.float32)
         self.input_scale = input_scale(self.cfg.model, self.pose_mean, self.pose_std)  # inputs: one std per group
         self.fns = apply_fns(self.cfg.model, self.cfg.inference.compiler_options)
-        self.quantized = {}  # weight format -> (decoder weights in that format, its jitted generator)
+        self.quantized = {}  # weight format -> the params with the generator's decoder in that format
 
     def encode_style(self, params, style, mask):
         """Style posterior of ``(b, S, P)`` clips; lengths padded (masked) to a bucket: few compilations."""
@@ -100,17 +100,24 @@ class TrainedZeggs:
         F = s_emb.shape[1]
         L = bucket_length(F)
         s_emb = jnp.pad(s_emb, ((0, 0), (0, L - F), (0, 0)))
-        if quant.check_format(weight_format) == "fp32":
-            out = self.fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
-        else:
+        if quant.check_format(weight_format) != "fp32":
             if weight_format not in self.quantized:
-                self.quantized[weight_format] = (
-                    quant.quantize_params(params, weight_format),
-                    jax.jit(quant.make_generate(self.cfg.model),
-                            compiler_options=self.cfg.inference.compiler_options))
-            qparams, fn = self.quantized[weight_format]
-            out = fn(qparams, s_emb, e, y0, r0, q0, f, mean, std)
+                means = quant.calibrate(self.cfg.model, params, *self.calibration_inputs(params))
+                self.quantized[weight_format] = quant.quantize_params(params, weight_format, input_means=means)
+            params = self.quantized[weight_format]
+        out = self.fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
         return {k: v[:, :F] for k, v in out.items()}
+
+    def calibration_inputs(self, params, frames: int = 256) -> tuple:
+        """Generator inputs of the weight formats' bias correction (:func:`jaxgest.zeggs.quant.calibrate`):
+        the neutral request -- the mean speech frame (normalised features 0), style embedding 0 (the
+        prior's mean), the mean pose, facing forward -- for ``frames`` frames; independent of any request."""
+        m = self.cfg.model
+        s_emb = self.encode_speech(params, jnp.zeros((1, frames, self.speech_stats.mean.shape[-1]), jnp.float32))
+        q0 = jnp.asarray([[1.0, 0.0, 0.0, 0.0]], jnp.float32)
+        return (s_emb, jnp.zeros((1, m.style_embedding), jnp.float32), jnp.zeros((1, m.pose_dim), jnp.float32),
+                jnp.zeros((1, 3), jnp.float32), q0, jnp.asarray([[0.0, 0.0, 1.0]], jnp.float32), self.pose_mean,
+                self.pose_std)
 
     # -- pieces ------------------------------------------------------------------------------------------
     def style_features(self, style: Motion) -> np.ndarray:

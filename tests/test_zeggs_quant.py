@@ -24,16 +24,16 @@ def test_int8_groups_are_within_a_step_and_keep_their_sums(n_in, n_out, group, s
     g = qk.group
     assert qk.w.dtype == jnp.int8 and qk.shape == (n_in, n_out) and g == (min(group, n_in) if group else n_in)
     n_groups = -(-n_in // g)
-    assert qk.scale.shape == (n_groups, n_out) and qk.w.shape == (n_groups * g, n_out)
-    scale = np.repeat(np.asarray(qk.scale, np.float64), g, axis=0)[:n_in]
-    q = np.asarray(qk.w, np.float64)
-    deq = (q.reshape(n_groups, g, n_out) * np.asarray(qk.scale)[:, None]).reshape(-1, n_out)[:n_in]
+    assert qk.scale.shape == (n_out, n_groups) and qk.w.shape == (n_out, n_groups * g)
+    scale = np.repeat(np.asarray(qk.scale, np.float64).T, g, axis=0)[:n_in]
+    q = np.asarray(qk.w, np.float64).T
+    deq = (q.reshape(n_groups, g, n_out) * np.asarray(qk.scale).T[:, None]).reshape(-1, n_out)[:n_in]
     err = deq - w
     assert np.all(np.abs(err) <= scale * (1 + 1e-5))  # at most one step (a flipped rounding)
     assert np.all(np.abs(np.asarray(qk.w)) <= 127)
     pad = n_groups * g - n_in
     group_err = np.concatenate([err, np.zeros((pad, n_out))]).reshape(n_groups, g, n_out).sum(1)
-    assert np.all(np.abs(group_err) <= 0.5 * np.asarray(qk.scale) * (1 + 1e-4) + 1e-7)
+    assert np.all(np.abs(group_err) <= 0.5 * np.asarray(qk.scale).T * (1 + 1e-4) + 1e-7)
 
 
 def test_formats_and_bad_format():

@@ -147,9 +147,18 @@ def tgst_case(batch: int, frames: int = 1280, *, with_torch: bool = True, repeat
     )
 
 
+CALIBRATION_SEED, CALIBRATION_FRAMES = 1, 200  # the bias correction's calibration run (other inputs)
+
+
 @functools.lru_cache(maxsize=None)
-def _quantized(fmt: str):
-    return Q.quantize_params(Z._params(), fmt)
+def _calibration():
+    return Q.calibrate(Z.CFG, Z._params(), *Z.generator_inputs(Z.CFG, 1, CALIBRATION_FRAMES,
+                                                                seed=CALIBRATION_SEED))
+
+
+@functools.lru_cache(maxsize=None)
+def _quantized(fmt: str, corrected: bool = True):
+    return Q.quantize_params(Z._params(), fmt, input_means=_calibration() if corrected else None)
 
 
 def _format_fn(fmt: str):
@@ -213,7 +222,8 @@ def zeggs_case(batch: int, frames: int, *, with_torch: bool = True, formats=("bf
 
 
 def format_accuracy(frames: int = 600, batch: int = 1, seed: int = 0) -> dict:
-    """RMS pose difference of each weight format against fp32 after ``frames`` generated frames.
+    """RMS pose difference of each weight format against fp32 after ``frames`` generated frames (bias
+    correction calibrated on ``CALIBRATION_FRAMES`` frames of other inputs; also without it).
 
     ``{fmt: {"rms": ..., "rms_pct_of_range": ..., "max_abs": ...}}``; the pose range is the mean over
     channels of (max - min over the fp32 frames), normalised pose units. ``control`` is fp32 again with
@@ -235,6 +245,7 @@ def format_accuracy(frames: int = 600, batch: int = 1, seed: int = 0) -> dict:
 
     for fmt in Q.WEIGHT_FORMATS[1:]:
         out[fmt] = stats(gen(_quantized(fmt), *args)["pose"])
+        out[f"{fmt}_without_bias_correction"] = stats(gen(_quantized(fmt, False), *args)["pose"])
     moved = (args[0], args[1], args[2] + 1e-6) + tuple(args[3:])
     out["control_fp32_pose0_plus_1e-6"] = stats(gen(Z._params(), *moved)["pose"])
     out["pose_range"] = float(rng)

@@ -41,6 +41,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgest.zeggs import int8_kernel
+
 WEIGHT_FORMATS = ("fp32", "bf16", "int8")
 INT8_GROUP = 32  # input channels per int8 scale
 
@@ -55,8 +57,9 @@ def check_format(weight_format: str) -> str:
 class QuantKernel:
     """A dense kernel of logical shape ``(in, out)`` stored narrow.
 
-    ``w``: ``(in, out)`` bfloat16, or ``(in_padded, out)`` int8 with ``in_padded`` a multiple of ``group``
-    (zero rows at the end); ``scale``: ``(in_padded / group, out)`` float32 for int8, ``None`` for bf16.
+    bf16: ``w (in, out)`` bfloat16, ``scale`` None. int8: ``w (out, in_padded)`` int8 (input channels
+    contiguous, the layout of :mod:`jaxgest.zeggs.int8_kernel`; ``in_padded`` a multiple of ``group``, zero
+    weights at the end), ``scale (out, in_padded / group)`` float32.
     """
 
     w: jax.Array
@@ -66,7 +69,7 @@ class QuantKernel:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return (self.in_features, self.w.shape[-1])
+        return (self.in_features, self.w.shape[0] if self.scale is not None else self.w.shape[1])
 
     @property
     def format(self) -> str:
@@ -103,8 +106,9 @@ def quantize_kernel(kernel, weight_format: str, group: int = INT8_GROUP):
     kg = np.concatenate([k, np.zeros((pad, n_out))], axis=0).reshape(-1, g, n_out)
     amax = np.max(np.abs(kg), axis=1)
     scale = np.where(amax > 0, amax / 127.0, 1.0)
-    q = np.clip(_round_keeping_sums(kg / scale[:, None]), -127, 127).astype(np.int8)
-    return QuantKernel(jnp.asarray(q.reshape(-1, n_out)), jnp.asarray(scale, jnp.float32), in_features=n_in,
+    q = np.clip(_round_keeping_sums(kg / scale[:, None]), -127, 127).astype(np.int8)  # (groups, g, out)
+    q = np.ascontiguousarray(np.transpose(q, (2, 0, 1)).reshape(n_out, -1))
+    return QuantKernel(jnp.asarray(q), jnp.asarray(np.ascontiguousarray(scale.T), jnp.float32), in_features=n_in,
                        group=g)
 
 
@@ -113,22 +117,33 @@ def dequantize(kernel) -> jax.Array:
     if not isinstance(kernel, QuantKernel):
         return jnp.asarray(kernel, jnp.float32)
     w = kernel.w.astype(jnp.float32)
-    if kernel.scale is not None:
-        n_out = w.shape[-1]
-        w = (w.reshape(-1, kernel.group, n_out) * kernel.scale[:, None]).reshape(-1, n_out)
-    return w[:kernel.in_features]
+    if kernel.scale is None:
+        return w
+    n_out = w.shape[0]
+    w = (w.reshape(n_out, -1, kernel.group) * kernel.scale[:, :, None]).reshape(n_out, -1)
+    return w[:, :kernel.in_features].T
 
 
 def dense_apply(x: jax.Array, kernel, bias: Optional[jax.Array] = None) -> jax.Array:
     """``x (..., in) @ kernel + bias``, accumulated in float32, for a float kernel or a :class:`QuantKernel`.
 
     The one dense product of the generator (:class:`jaxgest.zeggs.generator.Dense`). bf16: a bf16 x bf16
-    -> f32 ``dot`` (``x`` rounded to bf16); int8: ``x`` times the dequantised kernel.
+    -> f32 ``dot`` (``x`` rounded to bf16); int8: up to ``int8_kernel.MAX_ROWS`` rows the int8 CPU kernel
+    (:mod:`jaxgest.zeggs.int8_kernel`, when it is available), otherwise ``x`` times the dequantised kernel.
     """
     if isinstance(kernel, QuantKernel) and kernel.scale is None:
         y = jnp.dot(x.astype(jnp.bfloat16), kernel.w, preferred_element_type=jnp.float32)
     elif isinstance(kernel, QuantKernel):
-        y = jnp.dot(x, dequantize(kernel))
+        rows = int(np.prod(x.shape[:-1]))
+        if rows <= int8_kernel.MAX_ROWS and int8_kernel.available():
+            y = int8_kernel.gemv(x.reshape(rows, x.shape[-1]), kernel.w, kernel.scale)
+            y = y.reshape(x.shape[:-1] + (y.shape[-1],))
+        else:  # x zero-padded to the stored width, times the dequantised (out, in_padded) kernel
+            n_out, width = kernel.w.shape
+            w = (kernel.w.astype(jnp.float32).reshape(n_out, -1, kernel.group)
+                 * kernel.scale[:, :, None]).reshape(n_out, width)
+            xp = jnp.pad(x, [(0, 0)] * (x.ndim - 1) + [(0, width - x.shape[-1])])
+            y = jax.lax.dot_general(xp, w, (((x.ndim - 1,), (1,)), ((), ())))
     else:
         y = jnp.dot(x, kernel)
     return y if bias is None else y + jnp.reshape(bias, (1,) * (y.ndim - 1) + (-1,))

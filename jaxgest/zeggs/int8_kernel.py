@@ -49,6 +49,10 @@ SOURCE = r"""
 #include "xla/ffi/api/ffi.h"
 namespace ffi = xla::ffi;
 
+#if defined(__AVX512F__)
+#define W(p) _mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_loadu_si128((const __m128i*)(p))))
+#endif
+
 static void rows(const float* xp, const int8_t* q, const float* sc, float* y, int64_t n0, int64_t n1,
                  int64_t Kp, int64_t NG, int64_t G) {
 #if defined(__AVX512F__)
@@ -58,15 +62,16 @@ static void rows(const float* xp, const int8_t* q, const float* sc, float* y, in
       __m512 a0 = _mm512_setzero_ps(), a1 = a0, a2 = a0, a3 = a0;
       const int8_t* r0 = q + n * Kp; const int8_t* r1 = r0 + Kp;
       const int8_t* r2 = r1 + Kp; const int8_t* r3 = r2 + Kp;
-      const float* s0 = sc + n * NG; const float* s1 = s0 + NG; const float* s2 = s1 + NG; const float* s3 = s2 + NG;
+      const float* s0 = sc + n * NG; const float* s1 = s0 + NG;
+      const float* s2 = s1 + NG; const float* s3 = s2 + NG;
       for (int64_t g = 0; g < NG; ++g) {
         __m512 v0 = _mm512_setzero_ps(), v1 = v0, v2 = v0, v3 = v0;
         for (int64_t k = g * G; k < (g + 1) * G; k += 16) {
           __m512 xv = _mm512_loadu_ps(xp + k);
-          v0 = _mm512_fmadd_ps(_mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_loadu_si128((const __m128i*)(r0 + k)))), xv, v0);
-          v1 = _mm512_fmadd_ps(_mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_loadu_si128((const __m128i*)(r1 + k)))), xv, v1);
-          v2 = _mm512_fmadd_ps(_mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_loadu_si128((const __m128i*)(r2 + k)))), xv, v2);
-          v3 = _mm512_fmadd_ps(_mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_loadu_si128((const __m128i*)(r3 + k)))), xv, v3);
+          v0 = _mm512_fmadd_ps(W(r0 + k), xv, v0);
+          v1 = _mm512_fmadd_ps(W(r1 + k), xv, v1);
+          v2 = _mm512_fmadd_ps(W(r2 + k), xv, v2);
+          v3 = _mm512_fmadd_ps(W(r3 + k), xv, v3);
         }
         a0 = _mm512_fmadd_ps(v0, _mm512_set1_ps(s0[g]), a0);
         a1 = _mm512_fmadd_ps(v1, _mm512_set1_ps(s1[g]), a1);

@@ -30,13 +30,14 @@ disabled it fuses convert + multiply + reduce, no faster than the float32 dot). 
 C++ kernel through ``jax.ffi`` instead (:mod:`jaxgest.zeggs.int8_kernel`, compiled on first use; XLA when
 no compiler is found). bf16 pays at batch 32 (a native bf16 GEMM). Numbers: ``README.md``.
 
-Accuracy (RMS of the pose difference against fp32 over 600 generated frames, % of the mean per-channel
-pose range; bias correction calibrated on other inputs): paper preset, random weights of 3 seeds: int8
-0.47-0.54 % (without the correction 0.87-1.26 %; one scale per output channel and round-to-nearest:
-1.5-2.4 %), bf16 0.29-0.47 % without it; ``small`` preset trained 1600 steps on the synthetic data, two
-10 s clips of its training data through the inference pipeline (calibrated on the neutral request): int8 0.15-0.24 %, bf16 0.10-0.15 %. A random
-``small`` model (one of two seeds) sits where any persistent weight change moves the trajectory: int8
-11 %, bf16 1.0 % there. The test bound (``tiny`` preset, 1 %) is in ``tests/test_zeggs_quant.py``.
+Accuracy (RMS of the pose difference against fp32 over 600 generated frames, % of the mean per-channel pose
+range; bias correction calibrated on other inputs): paper preset, random weights of 3 seeds: int8 0.47-0.54
+% (without the correction 0.87-1.26 %; one scale per output channel and round-to-nearest: 1.5-2.4 %), bf16
+0.29-0.47 % without it; ``small`` preset trained 1600 steps on the synthetic data, two 10 s clips of its
+training data through the inference pipeline (calibrated on the neutral request): int8 0.15-0.24 %, bf16
+0.10-0.15 %. A random ``small`` model (one of two seeds) sits where any persistent weight change moves the
+trajectory: int8 11 %, bf16 1.0 % there. The test bound (``tiny`` preset, 1 %) is in
+``tests/test_zeggs_quant.py``.
 
 References: Ghorbani et al. 2023, §3.3 (the generator); Jacob et al. 2018 (per-channel weight-only
 quantisation); Nagel et al. 2019 (the output bias of rounding errors in weight quantisation).
@@ -119,8 +120,8 @@ def quantize_kernel(kernel, weight_format: str, group: int = INT8_GROUP):
     scale = np.where(amax > 0, amax / 127.0, 1.0)
     q = np.clip(_round_keeping_sums(kg / scale[:, None]), -127, 127).astype(np.int8)  # (groups, g, out)
     q = np.ascontiguousarray(np.transpose(q, (2, 0, 1)).reshape(n_out, -1))
-    return QuantKernel(jnp.asarray(q), jnp.asarray(np.ascontiguousarray(scale.T), jnp.float32), in_features=n_in,
-                       group=g)
+    scale = jnp.asarray(np.ascontiguousarray(scale.T), jnp.float32)
+    return QuantKernel(jnp.asarray(q), scale, in_features=n_in, group=g)
 
 
 def dequantize(kernel) -> jax.Array:
@@ -184,7 +185,8 @@ def quantize_params(params: dict, weight_format: str, group: int = INT8_GROUP,
         return {k: convert(v, None if means is None else means[k]) for k, v in tree.items()}
 
     if "generator" in params:
-        return {**params, "generator": quantize_params(params["generator"], weight_format, group, input_means)}
+        g = quantize_params(params["generator"], weight_format, group, input_means)
+        return {**params, "generator": g}
     return {**params, "decoder": convert(dict(params["decoder"]), input_means)}
 
 
@@ -202,7 +204,8 @@ def calibrate(cfg, params: dict, speech: jax.Array, style: jax.Array, pose0: jax
                                          mutable=["calibration"])
         return state["calibration"]["generator"]["decoder"]
 
-    sown = jax.jit(run)(params, speech, style, pose0, root_position0, root_rotation0, facing, pose_mean, pose_std)
+    sown = jax.jit(run)(params, speech, style, pose0, root_position0, root_rotation0, facing, pose_mean,
+                        pose_std)
 
     def means(tree):
         if "input_mean" in tree:

@@ -17,6 +17,10 @@ The GRU follows PyTorch's ``nn.GRU`` equations and parameter count (input and hi
 gates). The target-facing input is the unit facing direction rotated into the current root frame, not
 normalised (it is already O(1)); the authors normalise it with the other inputs.
 
+The decoder's linear layers are :class:`Dense` (``nn.Dense``'s parameters and initialisers): their kernels
+may be given in a narrow weight format at inference (:mod:`jaxgest.zeggs.quant`), so every format runs
+this same recurrence.
+
 References: Ghorbani et al. 2023, §3.3 (Fig. 4) and §4.2; Harvey & Pal 2018 (separate initializer);
 Cho et al. 2014 (GRU).
 """

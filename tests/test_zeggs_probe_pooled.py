@@ -42,3 +42,22 @@ def test_evaluate_pools_probe_datasets(zeggs_workdir, tiny_data, tmp_path):
     assert "pooled probe over 2 datasets" in md and "CI over 2 datasets" in md and "BeatAlign" not in md
     with pytest.raises(DataError, match="probe-seeds"):
         evaluate(zeggs_workdir, a, probe_seeds=-1, generation=False, progress=False)
+
+
+def test_encode_windows_batched_equals_clip_by_clip(zeggs_workdir, tiny_data):
+    """Batched encoding (windows of several clips and lengths together, padded rows masked out) gives the
+    posterior means of encoding each clip's windows alone."""
+    import numpy as np
+
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.zeggs import probes
+    from jaxgest.zeggs.inference import load_model
+
+    model = load_model(zeggs_workdir)
+    clips = load_folder(tiny_data)[:3]
+    spec = [(clips[0], 1.0), (clips[1], 2.0), (clips[2], 1.0)]  # two window lengths, interleaved
+    xs = [probes._windows(model, c, w, 0.5) for c, w in spec]
+    got = probes.encode_windows(model, xs, batch=4)  # 4 < windows per length: several chunks, last one padded
+    for (c, w), g in zip(spec, got):
+        want = probes.style_windows(model, c, w, stride_s=0.5)
+        assert g.shape == want.shape and np.allclose(g, want, atol=1e-5)

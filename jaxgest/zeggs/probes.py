@@ -52,6 +52,36 @@ def style_windows(model, clip, window_s: float = 4.0, *, stride_s: Optional[floa
     return np.asarray(mu)
 
 
+def encode_windows(model, xs, params=None, *, batch: int = 256) -> list:
+    """Posterior means of many clips' windows at once: ``xs`` a list of ``(W_i, n_i, P)`` window arrays
+    (:func:`_windows`), returned as a list of ``(W_i, D_e)``. Windows of equal length are encoded in
+    batches of ``batch`` rows (the last padded with masked-out rows, so one compilation per length); the
+    same values as :func:`style_windows` clip by clip."""
+    import jax.numpy as jnp
+
+    params = model.params if params is None else params
+    out = [None] * len(xs)
+    for n in sorted({x.shape[1] for x in xs}):
+        idx = [i for i, x in enumerate(xs) if x.shape[1] == n]
+        rows = np.concatenate([xs[i] for i in idx]).astype(np.float32)
+        mus = []
+        for s0 in range(0, len(rows), batch):
+            chunk = rows[s0:s0 + batch]
+            k = len(chunk)
+            x = np.zeros((batch,) + chunk.shape[1:], np.float32)
+            x[:k] = chunk
+            mask = np.zeros((batch, n), bool)
+            mask[:k] = True
+            mu, _ = model.encode_style(params, jnp.asarray(x), jnp.asarray(mask))
+            mus.append(np.asarray(mu)[:k])
+        mus = np.concatenate(mus)
+        k = 0
+        for i in idx:
+            out[i] = mus[k:k + len(xs[i])]
+            k += len(xs[i])
+    return out
+
+
 def statistics_windows(model, clip, window_s: float = 4.0, *, stride_s: Optional[float] = None) -> np.ndarray:
     """The raw-statistics control: per-channel mean and std ``(W, 2P)`` of the normalised pose features of
     the same windows as :func:`style_windows` (no network)."""
@@ -169,19 +199,16 @@ def probe(model, clips, *, seed: Optional[int] = None, window_s: float = PROBE_W
         raise DataError(f"probe: {len(list(units))} units for {len(clips)} clips")
     train_seed = int(model.meta.get("seed", 0)) if seed is None else int(seed)
     random_params = init_params(model.cfg.model, jax.random.key(train_seed))
-    encoders = {
-        "trained": lambda c: style_windows(model, c, window_s, stride_s=stride_s),
-        "random_init": lambda c: style_windows(model, c, window_s, stride_s=stride_s, params=random_params),
-        "raw_statistics": lambda c: statistics_windows(model, c, window_s, stride_s=stride_s),
-    }
+    xs = [_windows(model, c, window_s, stride_s)
+          for c in tqdm(clips, desc="probe windows", disable=not progress, leave=False)]
+    feats = {"trained": encode_windows(model, xs), "random_init": encode_windows(model, xs, random_params),
+             "raw_statistics": [np.concatenate([x.mean(1), x.std(1)], axis=1) for x in xs]}  # statistics_windows
+    del xs
     styles, contents = [c.style for c in clips], [c.content for c in clips]
     out = {"style": {}, "content": {}, "window_s": window_s, "stride_s": stride_s, "random_init_seed": train_seed,
            "protocol": "style: leave-one-content-out; content: leave-one-style-out; SE over clips"
            + ("" if units is None else " and over units")}
-    feats = {}
-    for name, fn in encoders.items():
-        feats[name] = [fn(c) for c in tqdm(clips, desc=f"probe windows ({name})", disable=not progress,
-                                           leave=False)]
+    for name in feats:
         out["style"][name] = grouped_probe(feats[name], styles, contents, units)
         out["content"][name] = grouped_probe(feats[name], contents, styles, units)
     for task in ("style", "content"):
@@ -192,7 +219,7 @@ def probe(model, clips, *, seed: Optional[int] = None, window_s: float = PROBE_W
             out[task]["trained_minus_by_unit"] = {
                 k: _mean_se(np.subtract(t["per_unit"], out[task][k]["per_unit"]))
                 for k in ("random_init", "raw_statistics")}
-        for k in encoders:
+        for k in feats:
             out[task][k].pop("per_clip")
     out["style_variance_share"] = variance_share(feats["trained"], styles)
     out["content_variance_share"] = variance_share(feats["trained"], contents)

@@ -48,7 +48,6 @@ def _pca_probe(features, labels, groups, dims: int) -> np.ndarray:
 
 
 def main(argv=None) -> int:
-    import jax.numpy as jnp
     from tqdm.auto import tqdm
 
     from jaxgest.motion.datasets import load_folder
@@ -72,10 +71,14 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(args.seed)
     de = model.cfg.model.style_embedding
     feats: dict[str, list] = {}
+    fe = [model.style_features(c.motion) for c in tqdm(clips, desc="pose features", leave=False)]
+    fps = model.cfg.model.fps
+    stride = int(probes.PROBE_STRIDE_S * fps)
     for w in (1.0, 2.0, 4.0, 8.0):
-        for c in tqdm(clips, desc=f"windows {w:g} s", leave=False):
-            x = probes._windows(model, c, w, probes.PROBE_STRIDE_S)
-            mu, logvar = model.encode_style(model.params, jnp.asarray(x), jnp.ones(x.shape[:2], bool))
+        n = max(int(w * fps), model.cfg.model.style_min_frames)  # as probes._windows
+        xs = [np.stack([f[s:s + n] for s in probes._window_starts(len(f), n, stride)]) for f in fe]
+        mus, logvars = probes.encode_windows(model, xs, with_logvar=True)
+        for x, mu, logvar in zip(xs, mus, logvars):
             mu, logvar = np.asarray(mu, np.float64), np.asarray(logvar, np.float64)
             raw = np.concatenate([x.mean(1), x.std(1)], axis=1)
             feats.setdefault(f"posterior mean, {w:g} s", []).append(mu)

@@ -52,19 +52,20 @@ def style_windows(model, clip, window_s: float = 4.0, *, stride_s: Optional[floa
     return np.asarray(mu)
 
 
-def encode_windows(model, xs, params=None, *, batch: int = 256) -> list:
+def encode_windows(model, xs, params=None, *, batch: int = 256, with_logvar: bool = False):
     """Posterior means of many clips' windows at once: ``xs`` a list of ``(W_i, n_i, P)`` window arrays
     (:func:`_windows`), returned as a list of ``(W_i, D_e)``. Windows of equal length are encoded in
     batches of ``batch`` rows (the last padded with masked-out rows, so one compilation per length); the
-    same values as :func:`style_windows` clip by clip."""
+    same values as :func:`style_windows` clip by clip. ``with_logvar``: also the posterior log-variances
+    (a second list)."""
     import jax.numpy as jnp
 
     params = model.params if params is None else params
-    out = [None] * len(xs)
+    out, out_lv = [None] * len(xs), [None] * len(xs)
     for n in sorted({x.shape[1] for x in xs}):
         idx = [i for i, x in enumerate(xs) if x.shape[1] == n]
         rows = np.concatenate([xs[i] for i in idx]).astype(np.float32)
-        mus = []
+        mus, lvs = [], []
         for s0 in range(0, len(rows), batch):
             chunk = rows[s0:s0 + batch]
             k = len(chunk)
@@ -72,14 +73,15 @@ def encode_windows(model, xs, params=None, *, batch: int = 256) -> list:
             x[:k] = chunk
             mask = np.zeros((batch, n), bool)
             mask[:k] = True
-            mu, _ = model.encode_style(params, jnp.asarray(x), jnp.asarray(mask))
+            mu, logvar = model.encode_style(params, jnp.asarray(x), jnp.asarray(mask))
             mus.append(np.asarray(mu)[:k])
-        mus = np.concatenate(mus)
+            lvs.append(np.asarray(logvar)[:k])
+        mus, lvs = np.concatenate(mus), np.concatenate(lvs)
         k = 0
         for i in idx:
-            out[i] = mus[k:k + len(xs[i])]
+            out[i], out_lv[i] = mus[k:k + len(xs[i])], lvs[k:k + len(xs[i])]
             k += len(xs[i])
-    return out
+    return (out, out_lv) if with_logvar else out
 
 
 def statistics_windows(model, clip, window_s: float = 4.0, *, stride_s: Optional[float] = None) -> np.ndarray:

@@ -117,8 +117,9 @@ def train_wall(log):  # training seconds summed over the invocations that traine
 res = {"seed": 0, "steps": steps, "overfit_steps": osteps, "wall_s_this_invocation": walls,
        "training_wall_s": {"synthetic": train_wall("train.log"), "overfit": train_wall("overfit_train.log")},
        "preset": cfg["preset"],
-       "config": {k: cfg["config"][k] for k in ("gru_hidden", "init_hidden", "speech_channels", "speech_kernels",
-                  "speech_embedding", "style_hidden", "style_embedding", "batch_size", "window", "fps",
+       "config": {k: {**cfg["config"]["model"], **cfg["config"]["train"]}[k] for k in (
+                  "gru_hidden", "init_hidden", "speech_channels", "speech_kernels", "speech_embedding",
+                  "style_hidden", "style_embedding", "input_norm", "loudness", "batch_size", "window", "fps",
                   "style_window_min", "style_window_max", "style_sampling", "kl_center", "kl_growth", "kl_cap")},
        "final_train_metrics": {k: last[k] for k in ("step", "loss", "recon", "kl", "steps_per_s")},
        "first_logged_train_metrics": {k: lines[0][k] for k in ("step", "loss", "recon", "kl")},

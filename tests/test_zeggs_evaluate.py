@@ -108,3 +108,56 @@ def test_leakage_statistics_on_planted_embeddings():
     assert r["contrasts"]["other_style - same_style_other_content"]["mean"] == pytest.approx(0, abs=1e-12)
     assert r["contrasts"]["same_clip_disjoint - own_window"]["z"] >= 3
     assert r["mean_loss"]["own_window"] < r["mean_loss"]["same_style_other_content"]
+
+
+def test_probe_folds_hold_out_each_group_once():
+    groups = ["c1", "c0", "c1", "c2", "c0", "c2", "c1"]
+    folds = probes.probe_folds(groups)
+    assert [g for g, _, _ in folds] == ["c0", "c1", "c2"]
+    tested = sorted(i for _, _, test in folds for i in test)
+    assert tested == list(range(len(groups)))  # every clip tested exactly once
+    for g, train, test in folds:
+        assert all(groups[i] == g for i in test) and all(groups[i] != g for i in train)
+        assert sorted(train + test) == list(range(len(groups)))
+    with pytest.raises(probes.DataError):
+        probes.probe_folds(["c0", "c0"])
+
+
+def test_grouped_probe_one_fit_per_fold_matches_per_clip_refits():
+    """One fit per fold scores every clip as a probe refitted for that clip alone would."""
+    rng = np.random.default_rng(2)
+    clips = _clips()
+    styles, contents = [c.style for c in clips], [c.content for c in clips]
+    feats = _planted_windows(clips, rng, style_scale=1.0, content_scale=1.0)  # noisy: accuracies in (0, 1)
+    r = probes.grouped_probe(feats, styles, contents)
+    for g, train, test in probes.probe_folds(contents):
+        xtr = np.concatenate([feats[i] for i in train])
+        ytr = np.concatenate([[styles[i]] * len(feats[i]) for i in train])
+        for i in test:
+            assert r["per_clip"][i] == probes.metrics.linear_probe_accuracy(xtr, ytr, feats[i], [styles[i]] * 6)
+    assert 0.25 < r["accuracy"] < 1.0  # neither chance nor perfect: the comparison above is not trivial
+
+
+def test_grouped_probe_units_pooled_datasets():
+    """Pooled datasets: the folds are by content across all datasets and the second CI is over datasets."""
+    rng = np.random.default_rng(3)
+    clips = _clips()
+    # dataset "a": style well separated; dataset "b": the same centres, windows drowned in noise
+    style_c = {s: rng.normal(size=8) * 3.0 for s in STYLES}
+    good = [style_c[c.style] + rng.normal(size=(6, 8)) * 0.1 for c in clips]
+    bad = [style_c[c.style] + rng.normal(size=(6, 8)) * 6.0 for c in clips]
+    feats, styles = good + bad, [c.style for c in clips] * 2
+    contents, units = [c.content for c in clips] * 2, ["a"] * len(clips) + ["b"] * len(clips)
+    r = probes.grouped_probe(feats, styles, contents, units)
+    assert r["folds"] == len(CONTENTS) and r["clips"] == 2 * len(clips)
+    assert r["unit_names"] == ["a", "b"]
+    per = np.asarray(r["per_clip"])
+    assert r["per_unit"] == pytest.approx([per[:20].mean(), per[20:].mean()])
+    assert r["per_unit"][0] > 0.9 and r["per_unit"][1] < 0.7
+    # CI over units: the mean of the two dataset means, SE of two values
+    m = probes._mean_se(r["per_unit"])
+    assert r["unit_mean"] == m and m["n"] == 2
+    assert m["standard_error"] == pytest.approx(abs(r["per_unit"][0] - r["per_unit"][1]) / 2)
+    # the clip-level CI of the pooled set: SE over all 40 clips
+    assert r["clip_mean"]["standard_error"] == pytest.approx(per.std(ddof=1) / np.sqrt(40))
+    assert probes.unit_means([1.0, 0.0, 0.5, 0.5], ["y", "x", "y", "x"]) == (["x", "y"], [0.25, 0.75])

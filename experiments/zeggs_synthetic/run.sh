@@ -2,7 +2,7 @@
 # ZeroEGGS on the built-in synthetic data (+ a one-clip overfit on the real ZEGGS sample).
 # Usage (from anywhere): PYTHON=/work/venv/bin/python nice -n 5 experiments/zeggs_synthetic/run.sh
 # Environment: PYTHON (default python), STEPS (synthetic training steps, default 8000), OVERFIT_STEPS
-# (default 1500), ZEGGS_DIR (default ../shared/data/speech-gesture/zeggs relative to the repo).
+# (default 1500), PROBE_SEEDS (datasets of the pooled probe, default 20), ZEGGS_DIR (default ../shared/data/speech-gesture/zeggs relative to the repo).
 set -euo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 REPO="$(cd "$HERE/../.." && pwd)"
@@ -12,6 +12,7 @@ J=("$PY" -m jaxgest.cli)
 OUT="${OUT:-experiments/zeggs_synthetic/out}"
 STEPS="${STEPS:-8000}"
 OVERFIT_STEPS="${OVERFIT_STEPS:-1500}"
+PROBE_SEEDS="${PROBE_SEEDS:-20}"
 ZEGGS_DIR="${ZEGGS_DIR:-$REPO/../shared/data/speech-gesture/zeggs}"
 SEED=0
 mkdir -p "$OUT"
@@ -38,6 +39,22 @@ s=$(t); "${J[@]}" zeggs evaluate --workdir "$OUT/work" --data "$OUT/data" --json
 s=$(t); "${J[@]}" synth --out "$OUT/data_heldout" --seed 1 > /dev/null
 "${J[@]}" zeggs evaluate --workdir "$OUT/work" --data "$OUT/data_heldout" --json "$OUT/eval_heldout.json" --seed $SEED \
     | tee "$OUT/eval_heldout.md"; WALL[evaluate_heldout]=$(( $(t) - s ))
+
+# 3c. the probes on PROBE_SEEDS more synthetic datasets pooled (synth seeds 1..N: the same contents and styles, new
+#     scripts and performances; leave-one-content-out over the pooled clips; CIs over clips and over datasets)
+s=$(t); probe_dirs=()
+for k in $(seq 1 "$PROBE_SEEDS"); do
+  [ -f "$OUT/probe_data/seed$k/manifest.csv" ] || "${J[@]}" synth --out "$OUT/probe_data/seed$k" --seed "$k" > /dev/null
+  probe_dirs+=("$OUT/probe_data/seed$k")
+done
+"${J[@]}" zeggs evaluate --workdir "$OUT/work" --data "$OUT/data" --json "$OUT/eval_pooled.json" --seed $SEED \
+    --no-generation --probe-data "${probe_dirs[@]}" | tee "$OUT/eval_pooled.md"; WALL[evaluate_pooled]=$(( $(t) - s ))
+
+# 3d. diagnostics: probe feature variants against the raw statistics (same pooled folds); Fréchet distance split
+"$PY" experiments/zeggs_synthetic/probe_diagnostics.py --workdir "$OUT/work" --data "${probe_dirs[@]}" \
+    --json "$OUT/probe_diagnostics.json" | tee "$OUT/probe_diagnostics.md"
+"$PY" experiments/zeggs_synthetic/frechet_diagnostic.py --workdir "$OUT/work" --data "$OUT/data" \
+    --json "$OUT/frechet_diagnostic.json" --seed $SEED | tee "$OUT/frechet_diagnostic.md"
 
 # 4. blend sweep between two styles (style examples of another content than the speech: zero-shot)
 s=$(t)
@@ -100,13 +117,17 @@ def train_wall(log):  # training seconds summed over the invocations that traine
 res = {"seed": 0, "steps": steps, "overfit_steps": osteps, "wall_s_this_invocation": walls,
        "training_wall_s": {"synthetic": train_wall("train.log"), "overfit": train_wall("overfit_train.log")},
        "preset": cfg["preset"],
-       "config": {k: cfg["config"][k] for k in ("gru_hidden", "init_hidden", "speech_channels", "speech_kernels",
-                  "speech_embedding", "style_hidden", "style_embedding", "batch_size", "window", "fps",
+       "config": {k: {**cfg["config"]["model"], **cfg["config"]["train"]}[k] for k in (
+                  "gru_hidden", "init_hidden", "speech_channels", "speech_kernels", "speech_embedding",
+                  "style_hidden", "style_embedding", "input_norm", "loudness", "batch_size", "window", "fps",
                   "style_window_min", "style_window_max", "style_sampling", "kl_center", "kl_growth", "kl_cap")},
        "final_train_metrics": {k: last[k] for k in ("step", "loss", "recon", "kl", "steps_per_s")},
        "first_logged_train_metrics": {k: lines[0][k] for k in ("step", "loss", "recon", "kl")},
        "evaluate": json.loads((out / "eval.json").read_text()),
-       "evaluate_heldout_scripts": json.loads((out / "eval_heldout.json").read_text())}
+       "evaluate_heldout_scripts": json.loads((out / "eval_heldout.json").read_text()),
+       "evaluate_pooled_probe": json.loads((out / "eval_pooled.json").read_text())["probe_pooled"],
+       "probe_diagnostics": json.loads((out / "probe_diagnostics.json").read_text()),
+       "frechet_diagnostic": json.loads((out / "frechet_diagnostic.json").read_text())}
 res["controls_and_outputs"] = json.loads((out / "extra.json").read_text())
 if (out / "overfit.json").is_file():
     res["overfit_real_zeggs"] = json.loads((out / "overfit.json").read_text())

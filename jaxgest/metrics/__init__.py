@@ -13,6 +13,7 @@ from jaxgest.metrics.generation import (
     hand_speed,
     kinematic_beats,
     linear_probe_accuracy,
+    linear_probe_predict,
     onset_times,
     shuffled_beat_alignment,
 )
@@ -44,6 +45,7 @@ __all__ = [
     "hands_metres",
     "kinematic_beats",
     "linear_probe_accuracy",
+    "linear_probe_predict",
     "onset_times",
     "path_distances",
     "shuffled_beat_alignment",

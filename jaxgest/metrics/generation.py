@@ -31,29 +31,27 @@ def _embeddings(x, name: str) -> np.ndarray:
     return x
 
 
-def linear_probe_accuracy(
-    train_emb, train_labels: Sequence, test_emb, test_labels: Sequence, *, l2: float = 1e-3
-) -> float:
-    """Accuracy of a closed-form ridge classifier fitted on (train_emb, train_labels), on the test set.
+def linear_probe_predict(train_emb, train_labels: Sequence, test_emb, *, l2: float = 1e-3) -> list:
+    """Labels predicted for ``test_emb`` by a closed-form ridge classifier fitted on (train_emb, train_labels).
 
-    train_emb: (N, D), test_emb: (T, D); labels: any hashables (style names), lengths N and T. Features are
+    train_emb: (N, D), test_emb: (T, D); labels: any hashables (style names), length N. Features are
     standardised with the training mean / std (std floored at 1e-8); the classifier is the ridge regression
     to one-hot targets W = (X^T X + l2 * N * I)^-1 X^T Y with an unpenalised bias (centred X, Y); the
-    prediction is argmax over the training classes (ties -> the first in sorted label order). Test labels
-    unseen in training count as errors. Deterministic; no iterative training.
+    prediction is argmax over the training classes (ties -> the first in sorted label order). Deterministic;
+    no iterative training. One fit predicts any number of test rows (:func:`linear_probe_accuracy` scores them).
 
     References: linear evaluation protocol of representation learning (e.g. Alain & Bengio 2016, linear
     probes); applied to ZeroEGGS style embeddings (Ghorbani et al. 2023, §5.2) per SPEC §5.
     """
-    xtr = _embeddings(train_emb, "linear_probe_accuracy: train_emb")
-    xte = _embeddings(test_emb, "linear_probe_accuracy: test_emb")
+    xtr = _embeddings(train_emb, "linear_probe: train_emb")
+    xte = _embeddings(test_emb, "linear_probe: test_emb")
     if xtr.shape[1] != xte.shape[1]:
-        raise DataError(f"linear_probe_accuracy: train dims {xtr.shape[1]} != test dims {xte.shape[1]}")
-    ytr, yte = list(train_labels), list(test_labels)
-    if len(ytr) != len(xtr) or len(yte) != len(xte):
-        raise DataError("linear_probe_accuracy: number of labels differs from number of embeddings")
+        raise DataError(f"linear_probe: train dims {xtr.shape[1]} != test dims {xte.shape[1]}")
+    ytr = list(train_labels)
+    if len(ytr) != len(xtr):
+        raise DataError("linear_probe: number of labels differs from number of embeddings")
     if not l2 > 0:
-        raise DataError(f"linear_probe_accuracy: l2 must be > 0, got {l2}")
+        raise DataError(f"linear_probe: l2 must be > 0, got {l2}")
     classes = sorted(set(ytr), key=str)
     index = {c: k for k, c in enumerate(classes)}
     onehot = np.zeros((len(ytr), len(classes)))
@@ -63,9 +61,24 @@ def linear_probe_accuracy(
     ymu = onehot.mean(axis=0)
     gram = xs.T @ xs + l2 * len(xs) * np.eye(xs.shape[1])
     w = np.linalg.solve(gram, xs.T @ (onehot - ymu))
-    pred = np.argmax(ts @ w + ymu, axis=1)
-    truth = np.array([index.get(c, -1) for c in yte])
-    return float(np.mean(pred == truth))
+    return [classes[k] for k in np.argmax(ts @ w + ymu, axis=1)]
+
+
+def linear_probe_accuracy(
+    train_emb, train_labels: Sequence, test_emb, test_labels: Sequence, *, l2: float = 1e-3
+) -> float:
+    """Accuracy of the closed-form ridge classifier of :func:`linear_probe_predict` fitted on
+    (train_emb, train_labels), on the test set (test_emb, test_labels; lengths T). Test labels unseen in
+    training count as errors.
+
+    References: linear evaluation protocol of representation learning (e.g. Alain & Bengio 2016, linear
+    probes); applied to ZeroEGGS style embeddings (Ghorbani et al. 2023, §5.2) per SPEC §5.
+    """
+    pred = linear_probe_predict(train_emb, train_labels, test_emb, l2=l2)
+    yte = list(test_labels)
+    if len(yte) != len(pred):
+        raise DataError("linear_probe_accuracy: number of labels differs from number of embeddings")
+    return float(np.mean([p == t for p, t in zip(pred, yte)]))
 
 
 # --------------------------------------------------------------------------------------------------------

@@ -58,6 +58,13 @@ def register(subparsers) -> None:
     e.add_argument("--json", required=True, metavar="OUT.json")
     e.add_argument("--max-clips", type=int, default=None)
     e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--probe-data", nargs="+", default=[], metavar="DIR",
+                   help="also probe on these dataset folders pooled (same folds; CIs over clips and datasets)")
+    e.add_argument("--probe-seeds", type=int, default=0, metavar="N",
+                   help="also probe on N built-in synthetic datasets (synth seeds 1..N, new scripts; generated "
+                   "in a temporary folder) pooled with --probe-data")
+    e.add_argument("--no-generation", action="store_true",
+                   help="probes and leakage only (skip beat alignment and the Fréchet distance)")
     e.set_defaults(func=_evaluate)
 
 
@@ -170,7 +177,9 @@ def _evaluate(args) -> int:
     from jaxgest.zeggs.evaluate import evaluate, markdown
 
     out = check_output_path(args.json)
-    result = evaluate(args.workdir, args.data, seed=args.seed, max_clips=args.max_clips)
+    result = evaluate(args.workdir, args.data, seed=args.seed, max_clips=args.max_clips,
+                      probe_data=args.probe_data, probe_seeds=args.probe_seeds,
+                      generation=not args.no_generation)
     write_text_atomic(out, json.dumps(result, indent=2) + "\n")
     print(markdown(result))
     return 0

@@ -20,6 +20,7 @@ References: Ghorbani et al. 2023, §5.1-5.2 (style generalisation, embedding spa
 from __future__ import annotations
 
 import collections
+import pathlib
 from typing import Optional
 
 import numpy as np
@@ -30,7 +31,7 @@ from jaxgest.motion import body, kinematics
 from jaxgest.motion.datasets import load_clip_audio, load_folder
 from jaxgest.zeggs import features
 from jaxgest.zeggs.inference import load_model
-from jaxgest.zeggs.probes import LEAKAGE_SOURCES, leakage, probe
+from jaxgest.zeggs.probes import LEAKAGE_SOURCES, leakage, pooled_probe, probe
 
 
 def _split_by_style(clips, seed: int = 0):
@@ -92,17 +93,58 @@ def motion_statistics_features(motion) -> np.ndarray:
     return np.concatenate([f[:, lay.local_positions], f[:, lay.local_velocities]], axis=1)
 
 
-def evaluate(workdir, data_dir, *, seed: int = 0, max_clips: Optional[int] = None, progress: bool = True) -> dict:
-    """All three figures for a trained model on a data folder (see the module docstring)."""
+def probe_datasets(probe_data=(), probe_seeds: int = 0, *, tmp_dir=None, progress: bool = True) -> list:
+    """The datasets of the pooled probe: ``(name, clips)`` of each folder of ``probe_data`` (named by its
+    path), then of the built-in synthetic dataset of seeds 1..``probe_seeds`` (the same 6 contents x 7
+    styles as ``jaxgest synth --seed 0`` with new scripts and performances), written by ``jaxgest synth``'s
+    writer into ``tmp_dir`` (required when ``probe_seeds > 0``) and named ``synth-seed-K``."""
     from tqdm.auto import tqdm
 
+    from jaxgest.motion.synthetic.dataset import write_dataset
+
+    out = []
+    for d in probe_data or ():
+        clips = load_folder(d)
+        if not clips:
+            raise DataError(f"{d}: no clips for the pooled probe")
+        out.append((str(d), clips))
+    if probe_seeds < 0:
+        raise DataError(f"--probe-seeds must be >= 0, got {probe_seeds}")
+    for k in tqdm(range(1, probe_seeds + 1), desc="probe datasets (synth)", disable=not progress, leave=False):
+        folder = pathlib.Path(tmp_dir) / f"seed{k}"
+        write_dataset(folder, seed=k, progress=False)
+        out.append((f"synth-seed-{k}", load_folder(folder)))
+    return out
+
+
+def evaluate(workdir, data_dir, *, seed: int = 0, max_clips: Optional[int] = None, progress: bool = True,
+             probe_data=(), probe_seeds: int = 0, generation: bool = True) -> dict:
+    """All three figures for a trained model on a data folder (see the module docstring).
+
+    ``probe_data`` (folders) / ``probe_seeds`` (synthetic seeds 1..N, generated in a temporary folder):
+    also the probes on those datasets pooled (:func:`jaxgest.zeggs.probes.pooled_probe`; the same
+    leave-one-content-out folds over the pooled clips, CIs over clips and over datasets) as
+    ``probe_pooled``. ``generation=False`` skips beat alignment and the Fréchet distance (probes and
+    leakage only)."""
+    import tempfile
+
+    from tqdm.auto import tqdm
+
+    if probe_seeds < 0:
+        raise DataError(f"--probe-seeds must be >= 0, got {probe_seeds}")
     model = load_model(workdir)
     clips = load_folder(data_dir)
     if not clips:
         raise DataError(f"{data_dir}: no clips")
     result = {"probe": probe(model, clips)}
+    if probe_data or probe_seeds:
+        with tempfile.TemporaryDirectory(prefix="jaxgest-probe-") as tmp:
+            sets = probe_datasets(probe_data, probe_seeds, tmp_dir=tmp, progress=progress)
+            result["probe_pooled"] = pooled_probe(model, sets, progress=progress)
     with_audio = [c for c in clips if c.audio is not None]
     result["leakage"] = leakage(model, with_audio) if with_audio else None
+    if not generation:
+        return result
     train, test = _split_by_style([c for c in clips if c.audio is not None], seed)
     test = test[:max_clips] if max_clips else test
     if not test:
@@ -152,10 +194,8 @@ def _pm(d) -> str:
     return f"{d['mean']:+.3f} ± {d['standard_error']:.3f} (z = {z})"
 
 
-def markdown(result: dict) -> str:
-    p, b, f = result["probe"], result["beat_alignment"], result["frechet_distance"]
-    lines = ["| probe (leave-one-content-out for style, leave-one-style-out for content) | trained | random init | "
-             "raw statistics | chance |", "|---|---:|---:|---:|---:|"]
+def _probe_lines(p: dict, title: str) -> list:
+    lines = [f"| {title} | trained | random init | raw statistics | chance |", "|---|---:|---:|---:|---:|"]
     for task in ("style", "content"):
         t = p[task]
         cells = [f"{t[k]['accuracy']:.3f} ± {t[k]['clip_mean']['ci95_half_width']:.3f}"
@@ -165,8 +205,24 @@ def markdown(result: dict) -> str:
                      + f" | {t['trained']['chance']:.3f} |")
         lines.append(f"| {task}: trained minus control (paired over clips) | | "
                      f"{_pm(t['trained_minus']['random_init'])} | {_pm(t['trained_minus']['raw_statistics'])} | |")
+        if "unit_mean" in t["trained"]:
+            cells = [f"{t[k]['unit_mean']['mean']:.3f} ± {t[k]['unit_mean']['ci95_half_width']:.3f}"
+                     for k in ("trained", "random_init", "raw_statistics")]
+            lines.append(f"| {task}: mean of the per-dataset accuracies, ± 95 % CI over {t['trained']['unit_mean']['n']} "
+                         "datasets | " + " | ".join(cells) + " | |")
+            lines.append(f"| {task}: trained minus control (paired over datasets) | | "
+                         f"{_pm(t['trained_minus_by_unit']['random_init'])} | "
+                         f"{_pm(t['trained_minus_by_unit']['raw_statistics'])} | |")
     lines += [f"| share of embedding variance explained by style / content | "
               f"{p['style_variance_share']:.3f} / {p['content_variance_share']:.3f} | | | |", ""]
+    return lines
+
+
+def markdown(result: dict) -> str:
+    lines = _probe_lines(result["probe"], "probe (leave-one-content-out for style, leave-one-style-out for content)")
+    if result.get("probe_pooled"):
+        lines += _probe_lines(result["probe_pooled"], f"pooled probe over {len(result['probe_pooled']['datasets'])} "
+                              "datasets (same folds: leave-one-content-out / leave-one-style-out)")
     lk = result.get("leakage")
     if lk:
         m = lk["mean_loss"]
@@ -175,6 +231,9 @@ def markdown(result: dict) -> str:
         lines += [f"| contrast {k} (mean ± SE over {lk['clips']} clips) | {_pm(v)} |"
                   for k, v in lk["contrasts"].items()]
         lines.append("")
+    if "beat_alignment" not in result:
+        return "\n".join(lines)
+    b, f = result["beat_alignment"], result["frechet_distance"]
     lines += [
         "| metric | value |",
         "|---|---:|",

@@ -52,6 +52,38 @@ def style_windows(model, clip, window_s: float = 4.0, *, stride_s: Optional[floa
     return np.asarray(mu)
 
 
+def encode_windows(model, xs, params=None, *, batch: int = 256, with_logvar: bool = False):
+    """Posterior means of many clips' windows at once: ``xs`` a list of ``(W_i, n_i, P)`` window arrays
+    (:func:`_windows`), returned as a list of ``(W_i, D_e)``. Windows of equal length are encoded in
+    batches of ``batch`` rows (the last padded with masked-out rows, so one compilation per length); the
+    same values as :func:`style_windows` clip by clip. ``with_logvar``: also the posterior log-variances
+    (a second list)."""
+    import jax.numpy as jnp
+
+    params = model.params if params is None else params
+    out, out_lv = [None] * len(xs), [None] * len(xs)
+    for n in sorted({x.shape[1] for x in xs}):
+        idx = [i for i, x in enumerate(xs) if x.shape[1] == n]
+        rows = np.concatenate([xs[i] for i in idx]).astype(np.float32)
+        mus, lvs = [], []
+        for s0 in range(0, len(rows), batch):
+            chunk = rows[s0:s0 + batch]
+            k = len(chunk)
+            x = np.zeros((batch,) + chunk.shape[1:], np.float32)
+            x[:k] = chunk
+            mask = np.zeros((batch, n), bool)
+            mask[:k] = True
+            mu, logvar = model.encode_style(params, jnp.asarray(x), jnp.asarray(mask))
+            mus.append(np.asarray(mu)[:k])
+            lvs.append(np.asarray(logvar)[:k])
+        mus, lvs = np.concatenate(mus), np.concatenate(lvs)
+        k = 0
+        for i in idx:
+            out[i], out_lv[i] = mus[k:k + len(xs[i])], lvs[k:k + len(xs[i])]
+            k += len(xs[i])
+    return (out, out_lv) if with_logvar else out
+
+
 def statistics_windows(model, clip, window_s: float = 4.0, *, stride_s: Optional[float] = None) -> np.ndarray:
     """The raw-statistics control: per-channel mean and std ``(W, 2P)`` of the normalised pose features of
     the same windows as :func:`style_windows` (no network)."""
@@ -69,34 +101,64 @@ def _mean_se(d) -> dict:
             "n": int(len(d))}
 
 
-def grouped_probe(features, labels, groups) -> dict:
-    """Leave-one-group-out linear probe (:func:`jaxgest.metrics.linear_probe_accuracy`).
-
-    features: one ``(W_i, D)`` array of window features per clip; labels: the clip's label to predict;
-    groups: the clip's fold (e.g. its content when predicting style). For every group the probe is fitted on
-    the windows of the clips of all other groups and scored on that group's windows, so every window is
-    predicted once, by a probe that saw neither its clip nor any clip sharing its group. Returns the accuracy
-    over all windows, the per-clip accuracies (fraction of a clip's windows right) and their standard error
-    and 95 % CI over clips (the clips are the independent units), the chance level ``1 / labels`` and counts.
-    """
-    labels, groups = list(labels), list(groups)
-    per_clip = np.zeros(len(features))
-    correct = total = 0
+def probe_folds(groups) -> list[tuple]:
+    """The folds of a leave-one-group-out probe: ``(group, train indices, test indices)`` for every group
+    (sorted by ``str``); a clip is tested exactly once, in its group's fold, by a probe fitted on the clips
+    of all other groups. Raises :class:`DataError` for fewer than two groups."""
+    groups = list(groups)
+    folds = []
     for g in sorted(set(groups), key=str):
         test = [i for i, h in enumerate(groups) if h == g]
         train = [i for i, h in enumerate(groups) if h != g]
         if not train:
             raise DataError("probe: one fold holds every clip (need at least two groups)")
+        folds.append((g, train, test))
+    return folds
+
+
+def unit_means(per_clip, units) -> tuple[list, list]:
+    """The mean of ``per_clip`` values within each unit (e.g. the synthetic dataset a clip comes from):
+    ``(sorted unit names, means)``. Each clip weighs the same within its unit."""
+    per_clip, units = np.asarray(per_clip, np.float64), list(units)
+    names = sorted(set(units), key=str)
+    return names, [float(per_clip[[i for i, u in enumerate(units) if u == n]].mean()) for n in names]
+
+
+def grouped_probe(features, labels, groups, units=None) -> dict:
+    """Leave-one-group-out linear probe (:func:`jaxgest.metrics.linear_probe_predict`, one fit per fold).
+
+    features: one ``(W_i, D)`` array of window features per clip; labels: the clip's label to predict;
+    groups: the clip's fold (e.g. its content when predicting style, :func:`probe_folds`). For every group
+    the probe is fitted on the windows of the clips of all other groups and predicts that group's windows,
+    so every window is predicted once, by a probe that saw neither its clip nor any clip sharing its group.
+    Returns the accuracy over all windows, the per-clip accuracies (fraction of a clip's windows right) and
+    their standard error and 95 % CI over clips (the clips are the independent units), the chance level
+    ``1 / labels`` and counts. ``units`` (one per clip, e.g. the dataset a clip was generated in): also the
+    per-unit mean accuracies and their SE / CI over units (``unit_mean``), for when clips of one unit may
+    not be independent.
+    """
+    labels, groups = list(labels), list(groups)
+    per_clip = np.zeros(len(features))
+    correct = total = 0
+    for _, train, test in probe_folds(groups):
         xtr = np.concatenate([features[i] for i in train])
         ytr = np.concatenate([[labels[i]] * len(features[i]) for i in train])
+        pred = metrics.linear_probe_predict(xtr, ytr, np.concatenate([features[i] for i in test]))
+        k = 0
         for i in test:
-            acc = metrics.linear_probe_accuracy(xtr, ytr, features[i], [labels[i]] * len(features[i]))
-            per_clip[i] = acc
-            correct += acc * len(features[i])
-            total += len(features[i])
-    return {"accuracy": float(correct / total), "per_clip": per_clip.tolist(), "clip_mean": _mean_se(per_clip),
-            "chance": 1.0 / len(set(labels)), "clips": len(features), "windows": int(total),
-            "folds": len(set(groups))}
+            n = len(features[i])
+            right = int(sum(p == labels[i] for p in pred[k:k + n]))
+            per_clip[i] = right / n
+            correct += right
+            total += n
+            k += n
+    out = {"accuracy": float(correct / total), "per_clip": per_clip.tolist(), "clip_mean": _mean_se(per_clip),
+           "chance": 1.0 / len(set(labels)), "clips": len(features), "windows": int(total),
+           "folds": len(set(groups))}
+    if units is not None:
+        out["unit_names"], out["per_unit"] = unit_means(per_clip, units)
+        out["unit_mean"] = _mean_se(out["per_unit"])
+    return out
 
 
 def variance_share(features, labels) -> float:
@@ -113,7 +175,7 @@ PROBE_WINDOW_S, PROBE_STRIDE_S = 2.0, 0.5
 
 
 def probe(model, clips, *, seed: Optional[int] = None, window_s: float = PROBE_WINDOW_S,
-          stride_s: Optional[float] = PROBE_STRIDE_S) -> dict:
+          stride_s: Optional[float] = PROBE_STRIDE_S, units=None, progress: bool = False) -> dict:
     """Style and content probes of the trained style encoder, beside two controls on the same folds.
 
     Encoders: ``trained`` (posterior means), ``random_init`` (the same architecture at the initialisation
@@ -123,35 +185,43 @@ def probe(model, clips, *, seed: Optional[int] = None, window_s: float = PROBE_W
     is predicted by a probe fitted on the clips of the *other* contents, so it cannot recognise the
     content's gestures); the content probe is leave-one-style-out. Paired per-clip differences of the
     trained encoder against each control, with standard errors over clips. When every clip has its own
-    content (e.g. ZEGGS files) leave-one-content-out is leave-one-clip-out.
+    content (e.g. ZEGGS files) leave-one-content-out is leave-one-clip-out. ``units`` (one per clip, e.g.
+    the synthetic dataset of a pooled set, :func:`pooled_probe`): accuracies and paired differences also
+    with their SE over units (``unit_mean``, ``trained_minus_by_unit``).
     """
     import jax
+    from tqdm.auto import tqdm
 
     from jaxgest.zeggs.model import init_params
 
     clips = [c for c in clips]
     if len({c.style for c in clips}) < 2 or len({c.content for c in clips}) < 2:
         raise DataError("style probe needs clips of at least two styles and two contents")
+    if units is not None and len(list(units)) != len(clips):
+        raise DataError(f"probe: {len(list(units))} units for {len(clips)} clips")
     train_seed = int(model.meta.get("seed", 0)) if seed is None else int(seed)
     random_params = init_params(model.cfg.model, jax.random.key(train_seed))
-    encoders = {
-        "trained": lambda c: style_windows(model, c, window_s, stride_s=stride_s),
-        "random_init": lambda c: style_windows(model, c, window_s, stride_s=stride_s, params=random_params),
-        "raw_statistics": lambda c: statistics_windows(model, c, window_s, stride_s=stride_s),
-    }
+    xs = [_windows(model, c, window_s, stride_s)
+          for c in tqdm(clips, desc="probe windows", disable=not progress, leave=False)]
+    feats = {"trained": encode_windows(model, xs), "random_init": encode_windows(model, xs, random_params),
+             "raw_statistics": [np.concatenate([x.mean(1), x.std(1)], axis=1) for x in xs]}  # statistics_windows
+    del xs
     styles, contents = [c.style for c in clips], [c.content for c in clips]
     out = {"style": {}, "content": {}, "window_s": window_s, "stride_s": stride_s, "random_init_seed": train_seed,
-           "protocol": "style: leave-one-content-out; content: leave-one-style-out; SE over clips"}
-    feats = {}
-    for name, fn in encoders.items():
-        feats[name] = [fn(c) for c in clips]
-        out["style"][name] = grouped_probe(feats[name], styles, contents)
-        out["content"][name] = grouped_probe(feats[name], contents, styles)
+           "protocol": "style: leave-one-content-out; content: leave-one-style-out; SE over clips"
+           + ("" if units is None else " and over units")}
+    for name in feats:
+        out["style"][name] = grouped_probe(feats[name], styles, contents, units)
+        out["content"][name] = grouped_probe(feats[name], contents, styles, units)
     for task in ("style", "content"):
-        t = out[task]["trained"]["per_clip"]
-        out[task]["trained_minus"] = {k: _mean_se(np.subtract(t, out[task][k]["per_clip"]))
+        t = out[task]["trained"]
+        out[task]["trained_minus"] = {k: _mean_se(np.subtract(t["per_clip"], out[task][k]["per_clip"]))
                                       for k in ("random_init", "raw_statistics")}
-        for k in encoders:
+        if units is not None:
+            out[task]["trained_minus_by_unit"] = {
+                k: _mean_se(np.subtract(t["per_unit"], out[task][k]["per_unit"]))
+                for k in ("random_init", "raw_statistics")}
+        for k in feats:
             out[task][k].pop("per_clip")
     out["style_variance_share"] = variance_share(feats["trained"], styles)
     out["content_variance_share"] = variance_share(feats["trained"], contents)
@@ -160,6 +230,26 @@ def probe(model, clips, *, seed: Optional[int] = None, window_s: float = PROBE_W
     out["chance"] = out["style"]["trained"]["chance"]
     out["styles"] = sorted(set(styles))
     out["test_windows"] = out["style"]["trained"]["windows"]
+    return out
+
+
+def pooled_probe(model, datasets, *, progress: bool = False, **kw) -> dict:
+    """:func:`probe` on the clips of several datasets pooled (e.g. synthetic sets of other ``synth`` seeds:
+    the same contents and styles, new scripts and performances), with the dataset as the unit of the
+    second CI. The folds stay leave-one-content-out over the pooled set: a content's clips of *every*
+    dataset are held out together. datasets: ``(name, clips)`` pairs."""
+    clips, units, names = [], [], []
+    for name, cs in datasets:
+        cs = list(cs)
+        if not cs:
+            raise DataError(f"{name}: no clips")
+        clips += cs
+        units += [str(name)] * len(cs)
+        names.append(str(name))
+    if len(set(names)) != len(names):
+        raise DataError("pooled probe: two datasets with the same name")
+    out = probe(model, clips, units=units, progress=progress, **kw)
+    out["datasets"] = names
     return out
 
 

@@ -182,6 +182,7 @@ def run(name, steps, args):
         params, opt, l, g = step(params, opt, batch)
         if i % 100 == 0 or i == steps - 1:
             curve.append((i, float(l)))
+            print(f"{name} step {i} loss {float(l):.4f} {time.perf_counter() - t0:.0f}s", flush=True)
     wall = time.perf_counter() - t0
     gn = {"/".join(str(getattr(k, "key", k)) for k in path): float(jnp.linalg.norm(v))
           for path, v in jax.tree_util.tree_leaves_with_path(g)}

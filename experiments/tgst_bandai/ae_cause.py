@@ -2,6 +2,7 @@
 
     python experiments/tgst_bandai/ae_cause.py cache TRAIN_DIR EVAL_DIR        # once: out/ae_cache.npz
     python experiments/tgst_bandai/ae_cause.py run NAME STEPS [key=value ...]   # one variant -> out/results/ae_cause/NAME.json
+    python experiments/tgst_bandai/ae_cause.py table NAME [NAME ...]            # markdown table of finished runs
 
 The cache holds the body exp-maps of the training clips (original + T-pose mirror, content labels) and of
 the held-out clips, at the model rate, so each run starts training in seconds. A run trains the autoencoder
@@ -187,7 +188,10 @@ def run(name, steps, args):
     gn = {"/".join(str(getattr(k, "key", k)) for k in path): float(jnp.linalg.norm(v))
           for path, v in jax.tree_util.tree_leaves_with_path(g)}
     # latent usage on held-out clips: per-channel std over frames / mean |z|
-    zs = np.concatenate([np.asarray(tmodel.encode_clip(params, jnp.asarray(u)[None], cfg=mcfg)[0]) for u, _ in held])
+    fmax = -(-max(len(u) for u, _ in held) // 128) * 128
+    padded = np.stack([np.concatenate([u, np.repeat(u[-1:], fmax - len(u), axis=0)]) for u, _ in held])
+    zb = np.asarray(jax.jit(lambda p, u: tmodel.encode_clip(p, u, cfg=mcfg))(params, padded))
+    zs = np.concatenate([zb[i, slice(*tmodel.clip_latent_range(len(u), cfg=mcfg))] for i, (u, _) in enumerate(held)])
     ae_h, sp_h = ae_angles(params, mcfg, held)
     ae_b, sp_b = ae_angles(params, mcfg, bye_clips)
     res = {"name": name, "steps": steps, "args": args, "wall_s": wall, "curve": curve, "grad_norms": gn,
@@ -220,5 +224,24 @@ if __name__ == "__main__":
         cache(sys.argv[2], sys.argv[3])
     elif sys.argv[1] == "run":
         run(sys.argv[2], int(sys.argv[3]), {k: _value(v) for k, v in (a.split("=", 1) for a in sys.argv[4:])})
-    else:
-        sys.exit("ae_cause.py: cache | run")
+    elif sys.argv[1] != "table":
+        sys.exit("ae_cause.py: cache | run | table")
+
+
+def table(names):
+    """Markdown rows of finished runs: python ae_cause.py table NAME [NAME ...]."""
+    d = OUT / "results" / "ae_cause"
+    p = json.loads((d / "pca16.json").read_text())
+    print("| run | steps | variant | held-out (deg) | `bye` training clips (deg) | exp-map speed out/in, held-out | "
+          "latent channels ~constant | final loss |")
+    print("|---|---|---|---|---|---|---|---|")
+    for n in names:
+        r = json.loads((d / f"{n}.json").read_text())
+        var = ", ".join(f"{k}={v}" for k, v in r["args"].items()) or "`fit` as is"
+        print(f"| {n} | {r['steps']} | {var} | {r['heldout_deg']:.2f} | {r['bye_train_deg']:.2f} | "
+              f"{r['channel_speed_ratio_heldout']:.2f} | {r['latent_dead_frac']:.2f} | {r['curve'][-1][1]:.3f} |")
+    print(f"| PCA-16 (original training clips) | - | - | {p['heldout_deg']:.2f} | {p['bye_train_deg']:.2f} | | | |")
+
+
+if __name__ == "__main__" and sys.argv[1] == "table":
+    table(sys.argv[2:])

@@ -136,3 +136,55 @@ def test_ae_batch_without_mirrored_clips():
         b = tdata.ae_batch(data, cfg, 0, 0)["upper"]
         assert b.shape == (64, ae.window, 39)
         assert bool((b < 0).any()) == mirror
+
+
+def _linear_path_cfg(standardize=True, latent_activation=True):
+    ae = dataclasses.replace(CFG.autoencoder, linear_path=True, standardize=standardize,
+                             latent_activation=latent_activation)
+    return dataclasses.replace(CFG, autoencoder=ae)
+
+
+@pytest.mark.parametrize("standardize", [True, False])
+def test_linear_path_pca_init_reproduces_block_pca_exactly(standardize):
+    """At step 0 the linear-path autoencoder (PCA-initialised, conv stacks' last layers zeroed) IS the block
+    PCA of its training clips: the round trip equals baselines.block_pca_reconstruct, clip ends included."""
+    from jaxgest.tgst import baselines
+    from jaxgest.tgst.autoencoder import init_linear_path
+
+    cfg = _linear_path_cfg(standardize)
+    ups = [np.asarray(smooth_motion(20 + i, 1, 96, 39)[0]) for i in range(4)]
+    los = [np.asarray(smooth_motion(30 + i, 1, 96, 24)[0]) for i in range(4)]
+    p = random_like(jax.eval_shape(lambda k: init_params(cfg, k), jax.random.key(0)))["autoencoder"]
+    if standardize:
+        stats = tdata.channel_stats(tdata.BodyData(ups, los, ups, los, list("abcd"), 60.0))
+        p = dict(p, **{k: jnp.asarray(v) for k, v in stats.items()})
+    p = init_linear_path(p, cfg.autoencoder, ups, los)
+    pca = baselines.block_pca_fit(ups, components=cfg.autoencoder.latent_dim, frames=4)
+    x = ups[1][:70]  # not a multiple of 4 frames: the end block is replicated like the baseline's
+    up, lo = jax.jit(tmodel.reconstruct, static_argnames="cfg")(p, jnp.asarray(x)[None], cfg=cfg)
+    ref = baselines.block_pca_reconstruct(pca, x)
+    np.testing.assert_allclose(np.asarray(up[0]), ref, atol=2e-5)
+    assert np.abs(ref - x).max() > 1e-3  # a real (lossy) reconstruction, not the identity
+    # the lower body is the least-squares map of the same codes: better than its mean on the training clips
+    lo_all = np.concatenate(los)
+    lo_hat = np.asarray(jax.jit(tmodel.reconstruct, static_argnames="cfg")(
+        p, jnp.asarray(np.stack(ups)), cfg=cfg)[1]).reshape(-1, 24)
+    assert np.mean((lo_hat - lo_all) ** 2) < np.mean((lo_all - lo_all.mean(0)) ** 2)
+
+
+def test_linear_path_and_latent_activation_change_the_model_as_stated():
+    from jaxgest.tgst.autoencoder import MotionAutoencoder
+
+    base = jax.eval_shape(lambda k: init_params(CFG, k), jax.random.key(0))["autoencoder"]
+    lin = jax.eval_shape(lambda k: init_params(_linear_path_cfg(False), k), jax.random.key(0))["autoencoder"]
+    assert set(lin) - set(base) == {"linear_encoder", "linear_upper", "linear_lower"}
+    assert lin["linear_encoder"]["kernel"].shape == (4, 39, 16)
+    assert lin["linear_upper"]["kernel"].shape == (16, 4 * 39)
+    assert lin["linear_lower"]["kernel"].shape == (16, 4 * 24)
+    # without the latent GELU the latent takes values below GELU's minimum (-0.17)
+    x = smooth_motion(40, 2, 64, 39) * 3.0
+    for act, can_go_low in ((True, False), (False, True)):
+        cfg = dataclasses.replace(CFG, autoencoder=dataclasses.replace(CFG.autoencoder, latent_activation=act))
+        p = random_params()["autoencoder"]
+        z = MotionAutoencoder(cfg.autoencoder).apply({"params": p}, x, method=MotionAutoencoder.encode)
+        assert bool((np.asarray(z) < -0.2).any()) == can_go_low

@@ -126,3 +126,14 @@ def test_checkpoints_check_only_the_model_config(tmp_path):
     with pytest.raises(CheckpointError, match="standardize"):
         check(tmp_path / "old", dataclasses.replace(
             TINY.model, autoencoder=dataclasses.replace(TINY.model.autoencoder, standardize=True)))
+
+
+def test_fit_pca_preset_is_fit_with_the_linear_path_and_paper_stays_the_papers():
+    fit, fp, paper = preset("fit"), preset("fit-pca"), preset("paper")
+    assert not paper.model.autoencoder.linear_path and paper.model.autoencoder.latent_activation
+    assert fp.model.autoencoder == dataclasses.replace(fit.model.autoencoder, linear_path=True)
+    assert dataclasses.replace(fp, name="fit", model=fit.model) == fit
+    assert fp.train.autoencoder.pca_init
+    assert api.count_params("fit-pca")["autoencoder"] - api.count_params("fit")["autoencoder"] == \
+        (4 * 39 * 16 + 16) + (16 * 4 * 39 + 4 * 39) + (16 * 4 * 24 + 4 * 24)
+    assert Config.from_dict(json.loads(json.dumps(fp.to_dict()))) == fp

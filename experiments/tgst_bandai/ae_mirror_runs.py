@@ -7,7 +7,8 @@ reference: the current pipeline), ``old`` (the previous offset-inferred mirror, 
 into the data pipeline), ``none`` (``ae_mirror=False``: original clips only). The cosine schedule is
 shortened to STEPS (``ae_lr_decay_steps=STEPS``) so a short run ends at the schedule's end. Extra
 ``key=value`` pairs are config overrides (Python literals), e.g.
-``autoencoder.encoder_channels=(64,32,32)`` (latent width d_z = 32).
+``autoencoder.encoder_channels=(64,32,32)`` (latent width d_z = 32); ``preset=NAME`` picks another preset
+than ``fit`` (e.g. ``preset=fit-pca``).
 Evaluate with diagnose.py WORKDIR EVAL_DIR OUT.json TRAIN_DIR --no-swap.
 """
 import ast
@@ -35,6 +36,7 @@ if __name__ == "__main__":
     steps, seed = int(steps), int(seed)
     overrides = {"ae_lr_decay_steps": steps}
     overrides.update({k: _value(v) for k, v in (a.split("=", 1) for a in sys.argv[6:])})
+    preset = overrides.pop("preset", "fit")
     if mode == "none":
         overrides["ae_mirror"] = False
     elif mode == "old":
@@ -44,5 +46,5 @@ if __name__ == "__main__":
     elif mode != "new":
         sys.exit(f"ae_mirror_runs.py: unknown MODE {mode!r} (new, old or none)")
     print(f"mode {mode}, overrides {overrides}", flush=True)
-    print(format_summary(train(train_dir, workdir, preset="fit", ae_steps=steps, transformer_steps=0, seed=seed,
+    print(format_summary(train(train_dir, workdir, preset=preset, ae_steps=steps, transformer_steps=0, seed=seed,
                                progress=False, log_every=100, ckpt_every=500, overrides=overrides)))

@@ -148,6 +148,11 @@ def main(argv) -> int:
             "per_clip": np.mean(v, axis=1).round(4).tolist(),
             "per_clip_joint": np.round(v, 3).tolist()}
         for k, v in per_joint.items()}
+    print("mean geodesic angle per joint (deg), held-out clips:")
+    print(f"{'joint':<12}" + "".join(f"{k:>14}" for k in per_joint))
+    for j, name in enumerate(joints + ["mean"]):
+        print(f"{name:<12}" + "".join(f"{(np.mean(v, axis=0)[j] if j < len(joints) else np.mean(v)):>14.2f}"
+                                      for v in per_joint.values()))
     report["ae_first_frame_deg"] = float(np.mean(first))
     report["ae_interior_deg"] = float(np.mean(interior))
 

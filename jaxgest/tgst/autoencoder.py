@@ -12,6 +12,7 @@ import chex
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgest.motion import rotations
 from jaxgest.nn import safe_norm
@@ -71,6 +72,11 @@ class MotionAutoencoder(nn.Module):
     ``ConvTranspose1d(k=3, padding=1, stride=1)`` of the authors' code is a same-size convolution with a
     flipped kernel, i.e. an ordinary ``padding=1`` convolution here (same parameter count).
     ``__call__`` (used for ``init``) returns ``((upper, lower), {"latents": z})``.
+    ``config.latent_activation=False`` drops the GELU on the latent (the encoder's last conv is linear).
+    ``config.linear_path`` adds a block-linear encoder (``linear_encoder``: a conv of kernel = stride =
+    ``time_reduction``) to the latent and a linear map of each latent frame to its block of frames
+    (``linear_upper``, ``linear_lower``) to each decoder's output (standardised units); :func:`init_linear_path`
+    sets them to the training data's block PCA.
     ``config.standardize`` adds the per-channel mean and std of the training data as four frozen parameter
     arrays (``upper_mean``/``upper_std`` (39), ``lower_mean``/``lower_std`` (24); gradients stopped, so Adam
     leaves them unchanged): inputs are standardised and outputs de-standardised (not in the paper).
@@ -87,7 +93,7 @@ class MotionAutoencoder(nn.Module):
             kernels=tuple(c.encoder_kernels),
             strides=tuple(c.encoder_strides),
             upsample=(1,) * n_enc,
-            final_activation=True,
+            final_activation=c.latent_activation,
         )
 
         def decoder(hidden, out: int) -> _ConvStack:  # the two decoders differ only in their widths
@@ -97,6 +103,11 @@ class MotionAutoencoder(nn.Module):
 
         self.upper_decoder = decoder(c.upper_decoder_channels, c.upper_channels)
         self.lower_decoder = decoder(c.lower_decoder_channels, c.lower_channels)
+        if c.linear_path:  # block-linear path (not in the paper; see AutoencoderConfig.linear_path)
+            r = c.time_reduction
+            self.linear_encoder = nn.Conv(c.latent_dim, kernel_size=(r,), strides=(r,), padding="VALID")
+            self.linear_upper = nn.Dense(r * c.upper_channels)
+            self.linear_lower = nn.Dense(r * c.lower_channels)
 
         if c.standardize:  # frozen data statistics (set by training, never updated: stop_gradient below)
             zeros, ones = nn.initializers.zeros, nn.initializers.ones
@@ -116,11 +127,19 @@ class MotionAutoencoder(nn.Module):
         if self.config.standardize:
             mean, std = self._stats("upper")
             upper = (upper - mean) / std
-        return self.encoder(upper)
+        z = self.encoder(upper)
+        if self.config.linear_path:  # blocks of r frames (the end replicated to a whole block)
+            r = self.config.time_reduction
+            x = jnp.pad(upper, ((0, 0), (0, -upper.shape[1] % r), (0, 0)), mode="edge")
+            z = z + self.linear_encoder(x)
+        return z
 
     def _decode(self, decoder, part: str, z: jax.Array) -> jax.Array:
         chex.assert_rank(z, 3)
         y = decoder(z)
+        if self.config.linear_path:  # each latent frame -> its block of r frames
+            b, t, _ = z.shape
+            y = y + getattr(self, f"linear_{part}")(z).reshape(b, t * self.config.time_reduction, -1)
         if self.config.standardize:
             mean, std = self._stats(part)
             y = mean + std * y
@@ -137,6 +156,52 @@ class MotionAutoencoder(nn.Module):
     def __call__(self, upper: jax.Array):
         z = self.encode(upper)
         return (self.decode_upper(z), self.decode_lower(z)), {"latents": z}
+
+
+def init_linear_path(params: dict, config: AutoencoderConfig, uppers, lowers) -> dict:
+    """``params`` with the block-linear path set to the block PCA of the clips and the conv stacks' last layers
+    zeroed: the autoencoder then reconstructs exactly like the PCA (:func:`jaxgest.tgst.baselines.block_pca_fit`
+    of ``uppers`` with ``latent_dim`` components per ``time_reduction`` frames, in raw exp-map units), the lower
+    body by the least-squares linear map from those codes.
+
+    uppers / lowers: the training clips ``(F_i, 39)`` / ``(F_i, 24)``; with ``config.standardize`` the stored
+    statistics in ``params`` are used to express the maps in standardised units (set them first).
+    Not in the paper: the starting point of ``AutoencoderConfig.linear_path``.
+    """
+    from jaxgest.tgst import baselines
+
+    if not config.linear_path:
+        raise ValueError("init_linear_path needs AutoencoderConfig.linear_path=True")
+    r, d = config.time_reduction, config.latent_dim
+    pca = baselines.block_pca_fit(uppers, components=d, frames=r)
+    mu, v = pca["mean"], pca["basis"]  # (r*39,), (d, r*39): z = v (x - mu), x_hat = mu + v^T z
+    blocks = np.concatenate([baselines._blocks(np.asarray(u, np.float64), r) for u in uppers])
+    lo_blocks = np.concatenate([baselines._blocks(np.asarray(l, np.float64), r) for l in lowers])
+    z = (blocks - mu) @ v.T
+    a = np.concatenate([z, np.ones((len(z), 1))], axis=1)
+    w_lo = np.linalg.lstsq(a, lo_blocks, rcond=None)[0]  # (d + 1, r*24)
+
+    def stats(part, ch):
+        if config.standardize:
+            return (np.tile(np.asarray(params[f"{part}_mean"], np.float64), r),
+                    np.tile(np.asarray(params[f"{part}_std"], np.float64), r))
+        return np.zeros(r * ch), np.ones(r * ch)
+
+    m_up, s_up = stats("upper", config.upper_channels)
+    m_lo, s_lo = stats("lower", config.lower_channels)
+    # encoder on standardised x_s = (x - m) / s: z = (v * s) x_s + v (m - mu); conv kernel (r, 39, d)
+    k_enc = (v * s_up).reshape(d, r, config.upper_channels).transpose(1, 2, 0)
+    b_enc = v @ (m_up - mu)
+    # decoders predict standardised y with x = m + s y: y = (mu + v^T z - m) / s
+    f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
+    out = dict(params)
+    out["linear_encoder"] = {"kernel": f32(k_enc), "bias": f32(b_enc)}
+    out["linear_upper"] = {"kernel": f32(v / s_up), "bias": f32((mu - m_up) / s_up)}
+    out["linear_lower"] = {"kernel": f32(w_lo[:-1] / s_lo), "bias": f32((w_lo[-1] - m_lo) / s_lo)}
+    for stack in ("encoder", "upper_decoder", "lower_decoder"):
+        last = max((k for k in params[stack]), key=lambda k: int(k.split("_")[1]))
+        out[stack] = dict(params[stack], **{last: jax.tree_util.tree_map(jnp.zeros_like, params[stack][last])})
+    return out
 
 
 def expmap_reconstruction_loss(pred: jax.Array, target: jax.Array) -> jax.Array:

@@ -34,6 +34,11 @@ Presets (``preset(name)``):
   content label equally often); the transformer's tokens carry no positions (``token_positions="none"``,
   as in the authors' code) so the soft swap matches tokens by content, not by index.
   Command: ``jaxgest tgst train --data DIR --workdir W --preset fit``. See experiments/tgst_bandai.
+* ``"fit-pca"`` -- ``fit`` plus a block-linear path beside the conv stacks (``linear_path``, not in the
+  paper: +6,796 parameters), initialised to the block PCA of the training clips, so the autoencoder starts
+  at the PCA-16 reconstruction and the convs learn the non-linear remainder. On Bandai-Namco the paper's
+  conv autoencoder alone stays far above PCA-16 (experiments/tgst_bandai, section 2).
+  Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-pca``.
 * ``"tiny"`` -- the paper's model (the same :class:`ModelConfig`: the widths are already tiny) with short
   windows and small batches (AE window 64, batch 4; transformer window 128, batch 4) and Adam 1e-3 so tests
   and ``jaxgest demo --quick`` train in seconds to a minute on a CPU. Not the paper's training setup.
@@ -59,7 +64,7 @@ TOKEN_POSITIONS = ("index", "none")
 SWAP_SIMILARITIES = ("dot", "scaled")
 AE_LR_SCHEDULES = ("constant", "cosine")
 AE_SAMPLINGS = ("windows", "content")
-PRESETS = ("tiny", "paper", "fit")  # names accepted by preset()
+PRESETS = ("tiny", "paper", "fit", "fit-pca")  # names accepted by preset()
 METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
 
 
@@ -79,6 +84,15 @@ class AutoencoderConfig:
     # per-channel standardisation: the encoder sees (x - mean) / std and the decoders predict mean + std * y,
     # with the training data's statistics stored as (frozen) parameters; False = the paper's raw exp-maps
     standardize: bool = False
+    # GELU after the last encoder conv, i.e. on the latent itself (True: the paper's/authors' code); False
+    # leaves the latent linear (GELU is bounded below at -0.17: negative latent values are squashed)
+    latent_activation: bool = True
+    # a block-linear path beside the conv stacks (not in the paper): the encoder adds a linear map of each
+    # non-overlapping block of ``time_reduction`` frames to the latent, each decoder adds a linear map of
+    # each latent frame back to its block; initialised to the block PCA of the training data (train.py:
+    # ``AutoencoderTrainConfig.pca_init``) with the conv stacks' last layers zeroed, so training starts at
+    # the PCA reconstruction and the convs learn the non-linear remainder
+    linear_path: bool = False
 
     @property
     def latent_dim(self) -> int:
@@ -182,6 +196,9 @@ class AutoencoderTrainConfig:
     lr_decay_steps: int = 10_000  # length of the cosine schedule (steps); constant lr afterwards
     sampling: str = "windows"  # "windows": uniform over all windows; "content": each content label equally
     mirror: bool = True  # the autoencoder also sees the mirrored clips (False: the original clips only)
+    # with ``AutoencoderConfig.linear_path``: start from the block PCA of the training clips (True) or from
+    # the random initialisation (False, an ablation)
+    pca_init: bool = True
 
     def __post_init__(self):
         for name, value, allowed in (("lr_schedule", self.lr_schedule, AE_LR_SCHEDULES),
@@ -310,7 +327,8 @@ def legacy_to_dict(flat: Mapping[str, Any]) -> dict:
 
 def preset(name: str = "paper") -> Config:
     """Named preset: ``"paper"`` (published sizes and training setup), ``"fit"`` (the paper's sizes with an
-    autoencoder recipe that fits real data) or ``"tiny"`` (fast tests/demo)."""
+    autoencoder recipe for real data), ``"fit-pca"`` (``fit`` with the PCA-initialised linear path) or
+    ``"tiny"`` (fast tests/demo)."""
     if name == "paper":
         return Config(name="paper", model=ModelConfig(edge_frames=16))
     if name == "tiny":
@@ -329,6 +347,10 @@ def preset(name: str = "paper") -> Config:
             train=TrainConfig(autoencoder=AutoencoderTrainConfig(
                 learning_rate=1e-3, lr_schedule="cosine", lr_decay_steps=6000, sampling="content")),
         )
-    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit' or 'tiny')")
+    if name == "fit-pca":
+        fit = preset("fit")
+        ae = dataclasses.replace(fit.model.autoencoder, linear_path=True)
+        return dataclasses.replace(fit, name="fit-pca", model=dataclasses.replace(fit.model, autoencoder=ae))
+    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit', 'fit-pca' or 'tiny')")
 
 

@@ -41,7 +41,8 @@ from jaxgest.tgst.workdir import (AE_KIND, AE_SUBDIR, MODEL, TRANSFORMER_KIND,  
                                   set_aside_stale_transformer, stored_transformer_meta,
                                   transformer_checkpointer)
 
-DEFAULT_STEPS = {"tiny": (200, 200), "paper": (10_000, 10_000), "fit": (6_000, 10_000)}
+DEFAULT_STEPS = {"tiny": (200, 200), "paper": (10_000, 10_000), "fit": (6_000, 10_000),
+                 "fit-pca": (6_000, 10_000)}
 PRESETS = tuple(DEFAULT_STEPS)
 
 
@@ -204,6 +205,14 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
         stats = tdata.channel_stats(body_data)
         params0 = dict(params0, autoencoder=dict(params0["autoencoder"], **{k: jnp.asarray(v)
                                                                            for k, v in stats.items()}))
+    if cfg.model.autoencoder.linear_path and cfg.train.autoencoder.pca_init:  # start at the block PCA
+        from jaxgest.tgst.autoencoder import init_linear_path
+
+        copies = 2 if cfg.train.autoencoder.mirror else 1
+        params0 = dict(params0, autoencoder=init_linear_path(
+            params0["autoencoder"], cfg.model.autoencoder, (body_data.upper + body_data.mirrored_upper)[
+                :copies * len(body_data.upper)], (body_data.lower + body_data.mirrored_lower)[
+                :copies * len(body_data.lower)]))
     summary = {"workdir": str(workdir), "preset": preset, "devices": info["devices"],
                "windows": {"ae": cfg.train.autoencoder.window, "transformer": cfg.train.transformer.window}}
 

@@ -13,6 +13,7 @@ paired difference with its standard error over references, and per content / per
 """
 import argparse
 import json
+import pathlib
 import sys
 
 import numpy as np
@@ -66,7 +67,7 @@ def main(argv):
                          "n": len(se)}
         if out["same_content"]["n"] and out["same_style"]["n"]:
             rows.append(out)
-    res = {"data": str(a.data), "trim_seconds": a.trim, "references": len(rows), "per_reference": rows}
+    res = {"data": pathlib.Path(a.data).name, "trim_seconds": a.trim, "references": len(rows), "per_reference": rows}
     for g in ("style", "content") if a.content else ("style",):
         sc = np.array([r["same_content"][g] for r in rows])
         ss = np.array([r["same_style"][g] for r in rows])

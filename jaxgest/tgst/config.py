@@ -203,7 +203,7 @@ class TransformerTrainConfig:
     # tokens, as the authors' trainer (``setup_style_tokens``); padded to length buckets with a mask
     style_tokens: str = "window"
     style_max_frames: int = 1024  # "clip_and_mirror": longer style clips give a random window this long (0 = no cap)
-    style_bucket: float = 1.25  # "clip_and_mirror": length-bucket ratio of the padded style sets (compilations)
+    style_bucket: float = 1.6  # "clip_and_mirror": length-bucket ratio of the padded style sets (3 shapes here)
     style_transition_seconds: float = 0.5  # "clip_and_mirror": blend into the mirror (their 30 frames at 60 fps)
     lambda_identity: float = 1.0  # weight of L_identity (eq. 12 fixes it to 1; settable for ablations)
     lambda_cyclic: float = 1.0  # lambda_c of eq. 12

@@ -22,6 +22,8 @@ def main(argv):
     ap.add_argument("--pairs", default="intra,inter")
     ap.add_argument("--seeds", default=None, help="labels of the workdirs (default 0, 1, ...)")
     ap.add_argument("--validity", action="store_true")
+    ap.add_argument("--world", action="store_true", help="then the first workdir under the world protocol too "
+                    "(OUT_PREFIX_<pairs>_world_s<k>.json)")
     args = ap.parse_args(argv[1:])
     labels = args.seeds.split(",") if args.seeds else [str(i) for i in range(len(args.workdirs))]
     for pairs in args.pairs.split(","):
@@ -33,6 +35,12 @@ def main(argv):
                                                          progress=False)
             write_json_atomic(f"{args.prefix}_{pairs}_s{label}.json", rep)
             print(pairs, label, rep["timing"], flush=True)
+    if args.world:
+        for pairs in args.pairs.split(","):
+            rep = evaluate(args.workdirs[0], args.eval_dir, pairs=pairs, protocol="world",
+                           methods=("soft", "hard", "adain", "avatarnet", "autoencoder"), progress=False)
+            write_json_atomic(f"{args.prefix}_{pairs}_world_s{labels[0]}.json", rep)
+            print(pairs, "world", labels[0], rep["timing"], flush=True)
 
 
 if __name__ == "__main__":

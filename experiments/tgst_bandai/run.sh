@@ -2,7 +2,7 @@
 # TGST real-data experiment on Bandai-Namco-Research-Motiondataset-1 (paper 000 §4, Tables 1-4).
 #
 #   bash experiments/tgst_bandai/run.sh                 # from anywhere; paths are relative to the repo
-#   SHARED=/path/to/shared AE_STEPS=4000 TR_STEPS=2000 SEEDS="0 1 2" SWAP_AE_STEP=500 bash experiments/tgst_bandai/run.sh
+#   SHARED=/path/to/shared AE_STEPS=3000 TR_STEPS=2000 SEEDS="0 1 2" STYLE_TOKENS=clip_and_mirror bash experiments/tgst_bandai/run.sh
 #
 # 1. split: training folder = every content except BYEBYE and GUIDE, evaluation folder = those two held-out
 #    contents (15 styles each); both are folders of symlinks to the shared files (nothing copied);
@@ -11,8 +11,10 @@
 #    ends with and without the padding, speed ratios, round-trip style error; recon_baselines.py);
 # 4. swap variants (swap_variants.py): token positions x swap similarity, one transformer each on the same
 #    autoencoder checkpoint, soft-swap diagnostics on the inter pairs;
-# 5. the preset's transformer for each seed in $SEEDS (out/main_s<seed>, the autoencoder copied in) and the
-#    Table 4 ablations on the first seed (transformer retrained with one loss term off);
+# 5. the preset's transformer for each seed in $SEEDS (out/main_s<seed>, the autoencoder copied in; style data
+#    $STYLE_TOKENS: "clip_and_mirror" = the whole style clip + its mirror as one token set, as the authors'
+#    trainer, or "window" = random style windows) and the Table 4 ablations on the first seed (transformer
+#    retrained with one loss term off);
 # 6. evaluations on intra and inter pairs, authors' protocol (cut $TRIM s) for every seed (eval_seeds.py, one
 #    process), world protocol and metric validity for the first seed, the ablations;
 # 7. summarize.py / table4.py -> out/results/tables.md, table4.md.
@@ -28,13 +30,14 @@ DATA="${DATA:-$SHARED/data/bandai-namco-1/data}"
 JAXGEST="${JAXGEST:-jaxgest}"
 PYTHON="${PYTHON:-python3}"
 PRESET="${PRESET:-fit}"
-AE_STEPS="${AE_STEPS:-4000}"   # of the preset's 6,000-step schedule (the recorded run stopped there)
+AE_STEPS="${AE_STEPS:-3000}"   # of the preset's 6,000-step schedule
 TR_STEPS="${TR_STEPS:-2000}"
 TRIM="${TRIM:-0.3}"            # seconds cut at both ends in the authors' protocol (the paper: 1 s)
 VAR_STEPS="${VAR_STEPS:-2000}"
 SEEDS="${SEEDS:-0 1 2}"
 HELDOUT="${HELDOUT:-byebye,guide}"
 ABLATIONS="${ABLATIONS:-identity cyclic structure appearance}"
+STYLE_TOKENS="${STYLE_TOKENS:-clip_and_mirror}"  # transformer style data (train.transformer.style_tokens)
 
 OUT="experiments/tgst_bandai/out"
 RES="$OUT/results"
@@ -94,11 +97,11 @@ with_ae() {  # with_ae WORKDIR: the trained autoencoder copied in
     cp -r "$AE/checkpoints/autoencoder/$AE_STEPS" "$1/checkpoints/autoencoder/"
   fi
 }
-train_tr() {  # train_tr WORKDIR SEED [extra]
+train_tr() {  # train_tr WORKDIR SEED [--ablate TERM]
   local wd="$1" seed="$2"; shift 2
   with_ae "$wd"
-  "$JAXGEST" tgst train --data "$TRAIN_DIR" --workdir "$wd" --preset "$PRESET" --ae-steps "$AE_STEPS" \
-    --transformer-steps "$TR_STEPS" --seed "$seed" --ckpt-every "$TR_STEPS" "$@"
+  "$PYTHON" experiments/tgst_bandai/train_transformer.py "$TRAIN_DIR" "$wd" "$AE_STEPS" "$TR_STEPS" "$seed" "$@" \
+    --preset "$PRESET" "train.transformer.style_tokens=$STYLE_TOKENS"
 }
 first_seed="${SEEDS%% *}"
 seed_dirs=(); seed_labels=()

@@ -1,8 +1,8 @@
 """Table 4 analogue: soft swap with each loss term switched off, intra and inter pairs pooled (as the paper).
 
-    python experiments/tgst_bandai/table4.py RESULTS_DIR
+    python experiments/tgst_bandai/table4.py RESULTS_DIR [FULL_PREFIX]
 
-Reads eval_{intra,inter}_s0.json (full loss, seed 0) and eval_ablate_{intra,inter}_s<term>.json (written by
+Reads FULL_PREFIX_{intra,inter}_s0.json (full loss, seed 0; FULL_PREFIX default "eval") and eval_ablate_{intra,inter}_s<term>.json (written by
 eval_seeds.py); prints the averages over the pooled pairs of mean / worst / w25 and the paired difference of
 the per-pair mean errors against the full loss (mean +- standard error over pairs). Paper values in brackets.
 """
@@ -31,7 +31,8 @@ def pooled(folder, names):
 
 def main(argv):
     folder = pathlib.Path(argv[1])
-    rows = {"full": pooled(folder, ["eval_intra_s0.json", "eval_inter_s0.json"])}
+    full = argv[2] if len(argv) > 2 else "eval"
+    rows = {"full": pooled(folder, [f"{full}_intra_s0.json", f"{full}_inter_s0.json"])}
     for t in ("identity", "cyclic", "structure", "appearance"):
         rows[t] = pooled(folder, [f"eval_ablate_intra_s{t}.json", f"eval_ablate_inter_s{t}.json"])
     print("| Loss | " + " | ".join(f"{g} {s}" for g in ("content (m)", "style (m/s)") for s in STATS)

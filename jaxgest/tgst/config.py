@@ -64,6 +64,7 @@ TOKEN_POSITIONS = ("index", "none")
 SWAP_SIMILARITIES = ("dot", "scaled")
 AE_LR_SCHEDULES = ("constant", "cosine")
 AE_SAMPLINGS = ("windows", "content")
+TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
 PRESETS = ("tiny", "paper", "fit", "fit-pca")  # names accepted by preset()
 METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
 
@@ -213,7 +214,14 @@ class TransformerTrainConfig:
 
     learning_rate: float = 1e-4  # Adam learning rate (§3.5)
     batch_size: int = 8  # content/style pairs per batch (§3.5)
-    window: int = 1280  # frames per content/style training clip (§3.5)
+    window: int = 1280  # frames per content training window (§3.5; and per style window with "window")
+    # style token set of a training pair: "window" = a random window of another clip (mirrored with
+    # probability 0.5); "clip_and_mirror" = that clip whole followed by its mirror (0.5 s blend), one set of
+    # tokens, as the authors' trainer (``setup_style_tokens``); padded to length buckets with a mask
+    style_tokens: str = "window"
+    style_max_frames: int = 1024  # "clip_and_mirror": longer style clips give a random window this long (0 = no cap)
+    style_bucket: float = 1.6  # "clip_and_mirror": length-bucket ratio of the padded style sets (3 shapes here)
+    style_transition_seconds: float = 0.5  # "clip_and_mirror": blend into the mirror (their 30 frames at 60 fps)
     lambda_identity: float = 1.0  # weight of L_identity (eq. 12 fixes it to 1; settable for ablations)
     lambda_cyclic: float = 1.0  # lambda_c of eq. 12
     lambda_structure: float = 1.0  # lambda_s of eq. 12
@@ -222,6 +230,14 @@ class TransformerTrainConfig:
     use_cyclic: bool = True  # switch L_cyclic on/off
     use_structure: bool = True  # switch L_structure on/off
     use_appearance: bool = True  # switch L_appearance on/off
+
+    def __post_init__(self):
+        if self.style_tokens not in TRANSFORMER_STYLE_TOKENS:
+            raise ValueError(f"train.transformer.style_tokens must be one of {TRANSFORMER_STYLE_TOKENS}, "
+                             f"got {self.style_tokens!r}")
+        if self.style_max_frames < 0 or not self.style_bucket >= 1.0 or self.style_transition_seconds < 0:
+            raise ValueError("train.transformer: style_max_frames >= 0, style_bucket >= 1 and "
+                             "style_transition_seconds >= 0 required")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -14,7 +14,11 @@
   original AND the mirrored clips (mirrored poses are fed to the encoder at transfer time, so the
   autoencoder sees them too; the paper does not say whether its AE data was mirrored).
 * :func:`transformer_batch` -- random UNALIGNED content/style pairs: two different clips drawn uniformly
-  (§4.1, "randomly and evenly sampled"), a random window of each, the style mirrored with probability 0.5.
+  (§4.1, "randomly and evenly sampled"), a random content window; the style is
+  ``cfg.train.transformer.style_tokens="window"``: a random window of the other clip, mirrored with
+  probability 0.5; ``"clip_and_mirror"``: the other clip whole followed by its mirror (blended over 0.5 s,
+  :func:`append_mirror`), one token set as in the authors' trainer (``setup_style_tokens``), padded to a
+  length bucket with a mask of its real tokens (``"style_valid"``).
 
 Every batch is a pure function of ``(seed, step)`` (``numpy.random.default_rng([seed, stage, step])``), so a
 killed run resumes bit-identically.
@@ -30,6 +34,7 @@ import numpy as np
 
 from jaxgest.errors import DataError
 from jaxgest.motion import body, datasets, kinematics
+from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion
 from jaxgest.tgst.config import Config
 
@@ -221,22 +226,49 @@ def sample_windows_idx(lengths: np.ndarray, length: int, batch: int, rng: np.ran
     return [(int(i), int(rng.integers(0, valid[i]))) for i in index]
 
 
+def append_mirror(upper: np.ndarray, mirrored: np.ndarray, transition: int) -> np.ndarray:
+    """A clip ``(F, C)`` of exp-maps followed by its mirror ``(F', C)``, blended over ``transition`` frames.
+
+    As the authors' ``MocapClip.append(mirrored, transit=True, period=30)`` (and
+    :func:`jaxgest.motion.kinematics.append_motion`): the clip's last ``transition`` frames move toward the
+    mirror's first ones (per-joint slerp, weight k / transition), then the mirror continues from its frame
+    ``transition``: ``F + F' - transition`` frames.
+    References: the authors' dataset/mocap.py (``add_mirror_motion``, ``append``).
+    """
+    a, b = np.array(upper, dtype=np.float32), np.asarray(mirrored, dtype=np.float32)
+    n = max(0, min(int(transition), len(a), len(b)))
+    if n:
+        qa = R.expmap_to_quat(a[-n:].reshape(n, -1, 3).astype(np.float64))
+        qb = R.expmap_to_quat(b[:n].reshape(n, -1, 3).astype(np.float64))
+        t = np.broadcast_to((np.arange(n) / n)[:, None], qa.shape[:2])
+        a[-n:] = R.quat_to_expmap(R.quat_slerp(qa, qb, t)).reshape(n, -1).astype(np.float32)
+    return np.concatenate([a, b[n:]])
+
+
+def style_token_count(frames, cfg: Config):
+    """Gesture tokens lying wholly in the first ``frames`` frames of a clip (token m covers latent frames
+    m*h .. m*h + w - 1): the real tokens of a style clip padded at the end. Works on ints and arrays."""
+    m = cfg.model
+    latent = np.asarray(frames) // m.autoencoder.time_reduction
+    return np.where(latent < m.token_width, 0, (latent - m.token_width) // m.token_stride + 1)
+
+
 def transformer_batch(data: BodyData, cfg: Config, seed: int, step: int,
                       mirror_prob: float = 0.5) -> dict:
-    """``{"content": (B, W, 39), "style": (B, W, 39)}`` of unaligned pairs of different clips.
+    """``{"content": (B, W, 39), "style": (B, Fs, 39)}`` of unaligned pairs of different clips.
 
-    Content and style clips are drawn uniformly among clips of at least W = ``cfg.train.transformer.window``
-    frames (two different clips per pair), each window starts uniformly at random, and the style window is
-    taken from the mirrored clip with probability ``mirror_prob`` (style augmentation, §4.1).
+    ``cfg.train.transformer.style_tokens="window"``: content and style clips are drawn uniformly among
+    clips of at least W = ``cfg.train.transformer.window`` frames (two different clips per pair), each
+    window starts uniformly at random, and the style window (Fs = W) is taken from the mirrored clip with
+    probability ``mirror_prob`` (style augmentation, §4.1). ``"clip_and_mirror"``: see
+    :func:`clip_and_mirror_batch` (adds ``"style_valid"``).
     References: Kuriyama et al. 2022, §3.5 ("no behavioral synchronization or time alignment").
     """
+    if cfg.train.transformer.style_tokens == "clip_and_mirror":
+        return clip_and_mirror_batch(data, cfg, seed, step)
     rng = _rng(seed, TRANSFORMER_STAGE, step)
     w, b = cfg.train.transformer.window, cfg.train.transformer.batch_size
-    usable = np.flatnonzero(data.lengths >= w)
-    if len(usable) < 2:
-        hi = int(np.argmax(data.lengths))
-        raise DataError(f"content/style pairs need two clips of >= {w} frames; the longest, {data.names[hi]}, "
-                        f"has {data.lengths[hi]} frames at the model rate")
+    usable = _usable_contents(data, w)
     content, style = [], []
     for _ in range(b):
         ci, si = rng.choice(usable, size=2, replace=False)
@@ -246,6 +278,57 @@ def transformer_batch(data: BodyData, cfg: Config, seed: int, step: int,
         content.append(data.upper[ci][cs:cs + w])
         style.append((data.mirrored_upper if mirrored else data.upper)[si][ss:ss + w])
     return {"content": np.stack(content), "style": np.stack(style)}
+
+
+def _usable_contents(data: BodyData, w: int) -> np.ndarray:
+    usable = np.flatnonzero(data.lengths >= w)
+    if len(usable) < 2:
+        hi = int(np.argmax(data.lengths))
+        raise DataError(f"content/style pairs need two clips of >= {w} frames; the longest, {data.names[hi]}, "
+                        f"has {data.lengths[hi]} frames at the model rate")
+    return usable
+
+
+def clip_and_mirror_batch(data: BodyData, cfg: Config, seed: int, step: int) -> dict:
+    """Content windows and whole style clips with their mirrors: the authors' transformer data.
+
+    Returns ``{"content": (B, W, 39), "style": (B, Fs, 39), "style_valid": (B, Ns) bool}``. Per pair: a
+    content window of W = ``cfg.train.transformer.window`` frames of a clip drawn uniformly among the clips
+    at least that long; a style clip drawn uniformly among the other clips, taken whole (a random window of
+    ``style_max_frames`` frames if longer) and followed by its mirror (:func:`append_mirror`, blended over
+    ``style_transition_seconds``): one token set holding both, as the authors' trainer builds it
+    (``setup_style_tokens``: ``add_mirror_motion`` then the whole clip encoded). The style arrays are
+    edge-padded at the end to Fs = the batch's longest, rounded up to a length bucket
+    (:func:`jaxgest.tgst.batched.bucket_length`, ratio ``style_bucket``: few shapes, few compilations);
+    ``style_valid[i, m]`` marks the tokens wholly inside pair i's real frames (:func:`style_token_count`).
+    The authors draw one style clip per batch; here every pair draws its own.
+    References: the authors' gsxf.py (``train_dataloader``, ``setup_style_tokens``, ``forward``).
+    """
+    from jaxgest.tgst.batched import bucket_length  # light module; avoids importing the model at load time
+
+    t = cfg.train.transformer
+    rng = _rng(seed, TRANSFORMER_STAGE, step)
+    w, b = t.window, t.batch_size
+    usable = _usable_contents(data, w)
+    transition = int(round(t.style_transition_seconds * data.fps))
+    content, style = [], []
+    for _ in range(b):
+        ci = int(rng.choice(usable))
+        si = int(rng.integers(0, len(data.lengths) - 1))
+        si += si >= ci  # any other clip
+        cs = int(rng.integers(0, data.lengths[ci] - w + 1))
+        content.append(data.upper[ci][cs:cs + w])
+        n = int(data.lengths[si])
+        cap = n if not t.style_max_frames else min(n, int(t.style_max_frames))
+        ss = int(rng.integers(0, n - cap + 1))
+        style.append(append_mirror(data.upper[si][ss:ss + cap], data.mirrored_upper[si][ss:ss + cap], transition))
+    frames = np.array([len(x) for x in style])
+    m = cfg.model.frame_multiple
+    fs = -(-bucket_length(int(frames.max()), t.style_bucket, multiple=m) // m) * m
+    padded = np.stack([np.pad(x, ((0, fs - len(x)), (0, 0)), mode="edge") for x in style])
+    ns = int(style_token_count(fs, cfg))
+    valid = np.arange(ns)[None, :] < style_token_count(frames, cfg)[:, None]
+    return {"content": np.stack(content), "style": padded, "style_valid": valid}
 
 
 def describe(data: BodyData, cfg: Optional[Config] = None) -> dict:

@@ -24,25 +24,31 @@ Params = M.Params
 _EPS = 1e-8
 
 
-def token_norm(x: jax.Array) -> jax.Array:
+def token_norm(x: jax.Array, valid=None) -> jax.Array:
     """||x||_tau: the L2 norm of every token averaged over tokens; ``(batch, N, d) -> (batch,)``.
 
+    valid: optional ``(batch, N)`` bool; the average is then over the real tokens of a padded set only.
     References: Kuriyama et al. 2022, §3.5 ("averaged L2-norm computed per each token").
     """
     chex.assert_rank(x, 3)
-    return jnp.mean(safe_norm(x), axis=1)
+    if valid is None:
+        return jnp.mean(safe_norm(x), axis=1)
+    chex.assert_shape(valid, x.shape[:2])
+    v = valid.astype(x.dtype)
+    return jnp.sum(safe_norm(x) * v, axis=1) / jnp.maximum(jnp.sum(v, axis=1), 1.0)
 
 
 def identity_loss(content_identity: jax.Array, content_tokens: jax.Array, style_identity: jax.Array,
-                  style_tokens: jax.Array) -> jax.Array:
+                  style_tokens: jax.Array, style_valid=None) -> jax.Array:
     """L_identity = ||g^{c|c} - g^c||_tau + ||g^{s|s} - g^s||_tau; ``(batch,)``.
 
     content_identity: content transferred with itself as style ``(batch, Nc, d)``; likewise for style.
+    style_valid: optional ``(batch, Ns)`` bool of the real tokens of a padded style set.
     References: Kuriyama et al. 2022, eq. 5.
     """
     chex.assert_equal_shape([content_identity, content_tokens])
     chex.assert_equal_shape([style_identity, style_tokens])
-    return token_norm(content_identity - content_tokens) + token_norm(style_identity - style_tokens)
+    return token_norm(content_identity - content_tokens) + token_norm(style_identity - style_tokens, style_valid)
 
 
 def cyclic_loss(cyclic_tokens: jax.Array, content_tokens: jax.Array) -> jax.Array:
@@ -110,22 +116,27 @@ def total_transformer_loss(identity: jax.Array, cyclic: jax.Array, structure: ja
 
 
 def transformer_loss_terms(tr_params: Params, content_tokens: jax.Array, style_tokens: jax.Array, *,
-                           cfg: ModelConfig, train: TransformerTrainConfig) -> dict[str, jax.Array]:
+                           cfg: ModelConfig, train: TransformerTrainConfig,
+                           style_valid=None) -> dict[str, jax.Array]:
     """Per-example loss terms ``(batch,)`` of eqs. 5-11 and their weighted sum (eq. 12) under ``"loss"``.
 
     content_tokens, style_tokens: raw tokens ``(batch, N, d)``. ``train`` gives the weights and switches of
-    eq. 12; switched-off terms are not computed and reported as zeros.
+    eq. 12; switched-off terms are not computed and reported as zeros. style_valid: optional ``(batch, Ns)``
+    bool of the real tokens of style sets padded to a common length (whole style clips of different lengths):
+    padded tokens are never attended to, get no swap weight and are left out of the style identity term, so
+    the terms equal those of the unpadded sets.
     References: Kuriyama et al. 2022, eqs. 5-12.
     """
+    sv = style_valid
     enc_c, aux_c = M.transformer_encode(tr_params, content_tokens, cfg=cfg)
-    enc_s, aux_s = M.transformer_encode(tr_params, style_tokens, cfg=cfg)
-    transferred, _ = M.swap_encoded(tr_params, enc_c, enc_s, style_tokens, cfg=cfg)  # g^{s|c}, eq. 4
+    enc_s, aux_s = M.transformer_encode(tr_params, style_tokens, cfg=cfg, valid=sv)
+    transferred, _ = M.swap_encoded(tr_params, enc_c, enc_s, style_tokens, cfg=cfg, style_valid=sv)  # eq. 4
     zeros = jnp.zeros(content_tokens.shape[:1], content_tokens.dtype)
     terms = {"identity": zeros, "cyclic": zeros, "structure": zeros, "appearance": zeros}
     if train.use_identity:  # eq. 5: each clip transferred with itself as style
         c_id, _ = M.swap_encoded(tr_params, enc_c, enc_c, content_tokens, cfg=cfg)
-        s_id, _ = M.swap_encoded(tr_params, enc_s, enc_s, style_tokens, cfg=cfg)
-        terms["identity"] = identity_loss(c_id, content_tokens, s_id, style_tokens)
+        s_id, _ = M.swap_encoded(tr_params, enc_s, enc_s, style_tokens, cfg=cfg, style_valid=sv)
+        terms["identity"] = identity_loss(c_id, content_tokens, s_id, style_tokens, sv)
     if train.use_cyclic or train.use_structure or train.use_appearance:
         enc_x, aux_x = M.transformer_encode(tr_params, transferred, cfg=cfg)
         if train.use_cyclic:  # eqs. 6-8: back-transfer with the content as style

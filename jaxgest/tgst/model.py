@@ -118,27 +118,35 @@ def reconstruct(ae_params: Params, upper: jax.Array, *, cfg: ModelConfig) -> tup
     return trim_clip(up, f, cfg=cfg), trim_clip(lo, f, cfg=cfg)
 
 
-def transformer_encode(tr_params: Params, tokens: jax.Array, *, cfg: ModelConfig):
-    """T_E: tokens ``(batch, N, d)`` -> (encoded ``(batch, 1 + N, d)``, aux with keys / cls)."""
-    return transformer_module(cfg).apply({"params": tr_params}, tokens, method=StyleTransformer.encode)
+def transformer_encode(tr_params: Params, tokens: jax.Array, *, cfg: ModelConfig, valid=None):
+    """T_E: tokens ``(batch, N, d)`` -> (encoded ``(batch, 1 + N, d)``, aux with keys / cls).
+
+    valid: optional ``(batch, N)`` bool of the real tokens of a padded set (padded ones are not attended to).
+    """
+    return transformer_module(cfg).apply({"params": tr_params}, tokens, valid, method=StyleTransformer.encode)
 
 
 def transformer_decode(tr_params: Params, encoded_content: jax.Array, encoded_style: jax.Array, *,
-                       cfg: ModelConfig):
+                       cfg: ModelConfig, style_valid=None):
     """T_D: (encoded content, encoded style) -> (decoded content ``(batch, Nc, d)``, aux), eq. 3."""
-    return transformer_module(cfg).apply({"params": tr_params}, encoded_content, encoded_style,
+    return transformer_module(cfg).apply({"params": tr_params}, encoded_content, encoded_style, style_valid,
                                          method=StyleTransformer.decode)
 
 
 def swap_encoded(tr_params: Params, encoded_content: jax.Array, encoded_style: jax.Array,
-                 style_tokens: jax.Array, *, cfg: ModelConfig, hard: bool = False):
-    """Decode and swap: eq. 3 then eq. 4 (or eq. 19 when ``hard``); returns (tokens, swap weights)."""
-    decoded, _ = transformer_decode(tr_params, encoded_content, encoded_style, cfg=cfg)
+                 style_tokens: jax.Array, *, cfg: ModelConfig, hard: bool = False, style_valid=None):
+    """Decode and swap: eq. 3 then eq. 4 (or eq. 19 when ``hard``); returns (tokens, swap weights).
+
+    style_valid: optional ``(batch, Ns)`` bool of the real style tokens of a padded style set (training on
+    whole style clips, :func:`jaxgest.tgst.data.transformer_batch`): padded tokens get weight 0.
+    """
+    decoded, _ = transformer_decode(tr_params, encoded_content, encoded_style, cfg=cfg, style_valid=style_valid)
     if hard:
-        weights = swap.hard_swap_weights(decoded, encoded_style, similarity=cfg.swap_similarity)
+        weights = swap.hard_swap_weights(decoded, encoded_style, similarity=cfg.swap_similarity,
+                                         style_valid=style_valid)
     else:
         weights = swap.soft_swap_weights(decoded, encoded_style, cfg.swap_temperature,
-                                         similarity=cfg.swap_similarity)
+                                         similarity=cfg.swap_similarity, style_valid=style_valid)
     return swap.apply_swap(weights, style_tokens), weights
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+import chex
 import jax
 import jax.numpy as jnp
 import optax
@@ -65,7 +66,9 @@ def make_transformer_train_step(cfg: Config, tx: optax.GradientTransformation, a
 
     batch: ``{"content": (B, Fc, 39), "style": (B, Fs, 39)}`` upper-body exp-maps of unaligned clips (any
     lengths >= 16 frames; encoded like :func:`jaxgest.tgst.model.transfer_arrays` encodes them: the content
-    with its edge padding, the style cut to its real frames). Metrics: ``loss``, ``identity``, ``cyclic``,
+    with its edge padding, the style cut to its real frames), optionally ``"style_valid": (B, Ns)`` bool, the
+    real tokens of style clips padded to a common length (``style_tokens="clip_and_mirror"``,
+    :func:`jaxgest.tgst.data.transformer_batch`). Metrics: ``loss``, ``identity``, ``cyclic``,
     ``structure``, ``appearance`` (batch means; switched-off terms are 0).
     """
     ae_params = jax.tree_util.tree_map(jnp.asarray, ae_params)
@@ -78,7 +81,10 @@ def make_transformer_train_step(cfg: Config, tx: optax.GradientTransformation, a
         del key, step  # deterministic model (no dropout), constant loss weights
         zc, zs, _, _ = encode_pair(ae_params, batch["content"], batch["style"], cfg=model)
         content, style = (jax.lax.stop_gradient(tokenize(z, w, h)) for z in (zc, zs))
-        terms = transformer_loss_terms(params, content, style, cfg=model, train=weights)
+        style_valid = batch.get("style_valid")  # whole style clips padded to a common length
+        if style_valid is not None:
+            chex.assert_shape(style_valid, style.shape[:2])
+        terms = transformer_loss_terms(params, content, style, cfg=model, train=weights, style_valid=style_valid)
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
         return metrics["loss"], metrics
 

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 
 
 SIMILARITIES = ("dot", "scaled")
+_MASKED = -1e9  # logit of a padded style token: exp underflows to exactly 0 next to any real token
 
 
 def _standardize(x: jax.Array, eps: float = 1e-5) -> jax.Array:
@@ -25,13 +26,15 @@ def _standardize(x: jax.Array, eps: float = 1e-5) -> jax.Array:
     return (x - mu) * jax.lax.rsqrt(var + eps)
 
 
-def swap_logits(decoded_content: jax.Array, encoded_style: jax.Array, similarity: str = "dot") -> jax.Array:
+def swap_logits(decoded_content: jax.Array, encoded_style: jax.Array, similarity: str = "dot",
+                style_valid=None) -> jax.Array:
     """Similarities ``(batch, Nc, Ns)`` of decoded content ``(batch, Nc, d)`` and encoded style tokens.
 
     encoded_style is the encoder output ``(batch, 1 + Ns, d)`` with CLS first; the CLS row is excluded.
     similarity: ``"dot"`` -- the plain dot product of eq. 4; ``"scaled"`` -- both sides normalised like a
     LayerNorm without parameters and divided by sqrt(d) (a cosine-like score in [-sqrt(d), sqrt(d)], so the
-    softmax cannot become one-hot from growing token norms alone).
+    softmax cannot become one-hot from growing token norms alone). style_valid: optional ``(batch, Ns)`` bool
+    of the real style tokens of a padded set; padded columns get a logit of -1e9 (weight 0, never the argmax).
     """
     chex.assert_rank([decoded_content, encoded_style], 3)
     chex.assert_axis_dimension(encoded_style, 2, decoded_content.shape[-1])
@@ -40,25 +43,31 @@ def swap_logits(decoded_content: jax.Array, encoded_style: jax.Array, similarity
         c, s = _standardize(c) / jnp.sqrt(c.shape[-1]).astype(c.dtype), _standardize(s)
     elif similarity != "dot":
         raise ValueError(f"unknown swap similarity {similarity!r} (expected one of {SIMILARITIES})")
-    return jnp.einsum("bnd,bmd->bnm", c, s)
+    logits = jnp.einsum("bnd,bmd->bnm", c, s)
+    if style_valid is not None:
+        chex.assert_shape(style_valid, s.shape[:2])
+        logits = jnp.where(style_valid.astype(bool)[:, None, :], logits, _MASKED)
+    return logits
 
 
 def soft_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array,
-                      temperature: float = 1.0, similarity: str = "dot") -> jax.Array:
+                      temperature: float = 1.0, similarity: str = "dot", style_valid=None) -> jax.Array:
     """W = softmax_m(g~c_n . T_E(g^s)_m / temperature) over style tokens (CLS excluded); ``(batch, Nc, Ns)``.
 
     temperature = 1 is eq. 4; temperature -> 0 tends to the hard swap of eq. 19.
     References: Kuriyama et al. 2022, eq. 4.
     """
-    return jax.nn.softmax(swap_logits(decoded_content, encoded_style, similarity) / temperature, axis=-1)
+    logits = swap_logits(decoded_content, encoded_style, similarity, style_valid)
+    return jax.nn.softmax(logits / temperature, axis=-1)
 
 
-def hard_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, similarity: str = "dot") -> jax.Array:
+def hard_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, similarity: str = "dot",
+                      style_valid=None) -> jax.Array:
     """One-hot argmax over style tokens of the same similarities; ``(batch, Nc, Ns)``.
 
     References: Kuriyama et al. 2022, eq. 19.
     """
-    logits = swap_logits(decoded_content, encoded_style, similarity)
+    logits = swap_logits(decoded_content, encoded_style, similarity, style_valid)
     return jax.nn.one_hot(jnp.argmax(logits, axis=-1), logits.shape[-1], dtype=logits.dtype)
 
 

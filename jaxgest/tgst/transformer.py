@@ -63,22 +63,40 @@ def band_mask(num_tokens: int, *, omega: int, variant: str = "paper") -> np.ndar
     return band_valid(idx[:, None], idx[None, :], omega=omega, variant=variant)
 
 
-def dense_banded_attention(q, k, v, *, omega: int, variant: str = "paper"):
-    """Reference masked attention; q, k, v ``(batch, 1 + N, d)`` -> (out ``(batch, 1 + N, d)``, weights)."""
+def _key_valid(valid, batch: int, n: int):
+    """Keys ``(batch, 1 + N)`` that may be attended to: CLS always, gesture token j where ``valid[:, j]``
+    (``None``: every token)."""
+    if valid is None:
+        return None
+    chex.assert_shape(valid, (batch, n))
+    return jnp.concatenate([jnp.ones((batch, 1), bool), valid.astype(bool)], axis=1)
+
+
+def dense_banded_attention(q, k, v, *, omega: int, variant: str = "paper", valid=None):
+    """Reference masked attention; q, k, v ``(batch, 1 + N, d)`` -> (out ``(batch, 1 + N, d)``, weights).
+
+    valid: optional ``(batch, N)`` bool, the real gesture tokens of a padded sequence: padded tokens are
+    never attended to (their own rows are computed but meaningless).
+    """
     chex.assert_equal_shape([q, k, v])
     d = q.shape[-1]
-    mask = jnp.asarray(band_mask(q.shape[1] - 1, omega=omega, variant=variant))
+    mask = jnp.asarray(band_mask(q.shape[1] - 1, omega=omega, variant=variant))[None]
+    kv = _key_valid(valid, q.shape[0], q.shape[1] - 1)
+    if kv is not None:
+        mask = mask & kv[:, None, :]
     scores = jnp.einsum("bqd,bkd->bqk", q, k) / math.sqrt(d)
-    weights = jax.nn.softmax(jnp.where(mask[None], scores, _MASKED), axis=-1)
+    weights = jax.nn.softmax(jnp.where(mask, scores, _MASKED), axis=-1)
     return jnp.einsum("bqk,bkd->bqd", weights, v), weights
 
 
-def blockwise_banded_attention(q, k, v, *, omega: int, variant: str = "paper", block_size: int = 32):
+def blockwise_banded_attention(q, k, v, *, omega: int, variant: str = "paper", block_size: int = 32,
+                               valid=None):
     """Banded attention in O(N * block_size): equal to :func:`dense_banded_attention` (up to float error).
 
     q, k, v: ``(batch, 1 + N, d)`` with CLS at index 0. Gesture queries are grouped in blocks of
     ``block_size >= omega``; block b attends to the CLS key and to the gesture keys of blocks b-1, b, b+1
     (which contain its whole band), with the band mask applied inside. The CLS query attends densely.
+    valid: optional ``(batch, N)`` bool of the real gesture tokens (padded keys are masked out).
     """
     chex.assert_equal_shape([q, k, v])
     if block_size < omega:
@@ -109,12 +127,19 @@ def blockwise_banded_attention(q, k, v, *, omega: int, variant: str = "paper", b
     s_win = jnp.einsum("bnqd,bnkd->bnqk", qb, kw) * scale
     s_cls = jnp.einsum("bnqd,bd->bnq", qb, cls_k) * scale
     s = jnp.concatenate([s_cls[..., None], s_win], axis=-1)
-    valid = np.concatenate([cls_valid[..., None], win_valid], axis=-1)
-    w = jax.nn.softmax(jnp.where(jnp.asarray(valid)[None], s, _MASKED), axis=-1)
+    allowed = jnp.asarray(np.concatenate([cls_valid[..., None], win_valid], axis=-1))[None]  # (1, nb, B, 1+3B)
+    kv = _key_valid(valid, bsz, n)
+    if kv is not None:  # the padded keys of each window, (b, nb, 1 + 3B)
+        vk = jnp.pad(kv[:, 1:], ((0, 0), (block_size, size - n + block_size))).reshape(bsz, -1, block_size)
+        vk = jnp.concatenate([vk[:, :-2], vk[:, 1:-1], vk[:, 2:]], axis=2)
+        vk = jnp.concatenate([jnp.ones((bsz, nb, 1), bool), vk], axis=-1)
+        allowed = allowed & vk[:, :, None, :]
+    w = jax.nn.softmax(jnp.where(allowed, s, _MASKED), axis=-1)
     out = w[..., :1] * cls_v[:, None, None, :] + jnp.einsum("bnqk,bnkd->bnqd", w[..., 1:], vw)
     out = out.reshape(bsz, size, d)[:, :n]
 
-    w0 = jax.nn.softmax(jnp.einsum("bd,bkd->bk", cls_q, k) * scale, axis=-1)  # CLS row: every key
+    s0 = jnp.einsum("bd,bkd->bk", cls_q, k) * scale
+    w0 = jax.nn.softmax(s0 if kv is None else jnp.where(kv, s0, _MASKED), axis=-1)  # CLS row: every key
     out0 = jnp.einsum("bk,bkd->bd", w0, v)
     return jnp.concatenate([out0[:, None], out], axis=1)
 
@@ -139,14 +164,16 @@ class StyleTransformerEncoder(nn.Module):
 
     aux: ``keys`` ``(batch, N, d)`` (gesture keys k_i = m_k LN(g_i + p_i), for the structure loss, eq. 9),
     ``cls`` ``(batch, d)`` (the CLS output, for the appearance loss), and ``attention``
-    ``(batch, 1 + N, 1 + N)`` with the dense implementation only.
+    ``(batch, 1 + N, 1 + N)`` with the dense implementation only. ``valid`` (optional ``(batch, N)`` bool):
+    the real tokens of a sequence padded to a common length; padded tokens are never attended to, so the
+    outputs of the real tokens and CLS do not depend on the padding.
     References: Kuriyama et al. 2022, §3.4, eq. 2.
     """
 
     config: TransformerConfig
 
     @nn.compact
-    def __call__(self, tokens: jax.Array):
+    def __call__(self, tokens: jax.Array, valid=None):
         cfg = self.config
         d = cfg.token_dim
         chex.assert_rank(tokens, 3)
@@ -170,11 +197,11 @@ class StyleTransformerEncoder(nn.Module):
         q, k, v = q_proj(z), k_proj(z), v_proj(z)
         aux = {"keys": k[:, 1:]}
         if cfg.attention_impl == "dense":
-            a, weights = dense_banded_attention(q, k, v, omega=cfg.omega, variant=cfg.variant)
+            a, weights = dense_banded_attention(q, k, v, omega=cfg.omega, variant=cfg.variant, valid=valid)
             aux["attention"] = weights
         else:
             a = blockwise_banded_attention(q, k, v, omega=cfg.omega, variant=cfg.variant,
-                                           block_size=cfg.block_size)
+                                           block_size=cfg.block_size, valid=valid)
         if cfg.variant == "paper":  # pre-LN
             x = x + o_proj(a)
             y = x + mlp(ln_mlp(x))
@@ -190,13 +217,14 @@ class StyleTransformerDecoder(nn.Module):
 
     encoded_content ``(batch, 1 + Nc, d)``, encoded_style ``(batch, 1 + Ns, d)`` (encoder outputs, CLS
     rows dropped here) -> (decoded content ``(batch, Nc, d)``, aux with ``attention`` (batch, Nc, Ns)).
+    ``style_valid`` (optional ``(batch, Ns)`` bool): the real style tokens; padded ones are not attended to.
     References: Kuriyama et al. 2022, §3.4, eq. 3.
     """
 
     config: TransformerConfig
 
     @nn.compact
-    def __call__(self, encoded_content: jax.Array, encoded_style: jax.Array):
+    def __call__(self, encoded_content: jax.Array, encoded_style: jax.Array, style_valid=None):
         cfg = self.config
         d = cfg.token_dim
         chex.assert_rank([encoded_content, encoded_style], 3)
@@ -209,6 +237,9 @@ class StyleTransformerDecoder(nn.Module):
 
         zc, zs = ln_attn(c), ln_attn(s)
         scores = jnp.einsum("bqd,bkd->bqk", q_proj(zc), k_proj(zs)) / math.sqrt(d)
+        if style_valid is not None:
+            chex.assert_shape(style_valid, s.shape[:2])
+            scores = jnp.where(style_valid.astype(bool)[:, None, :], scores, _MASKED)
         weights = jax.nn.softmax(scores, axis=-1)
         a = o_proj(jnp.einsum("bqk,bkd->bqd", weights, v_proj(zs)))
         if cfg.variant == "paper":
@@ -232,11 +263,11 @@ class StyleTransformer(nn.Module):
         self.encoder = StyleTransformerEncoder(self.config)
         self.decoder = StyleTransformerDecoder(self.config)
 
-    def encode(self, tokens: jax.Array):
-        return self.encoder(tokens)
+    def encode(self, tokens: jax.Array, valid=None):
+        return self.encoder(tokens, valid)
 
-    def decode(self, encoded_content: jax.Array, encoded_style: jax.Array):
-        return self.decoder(encoded_content, encoded_style)
+    def decode(self, encoded_content: jax.Array, encoded_style: jax.Array, style_valid=None):
+        return self.decoder(encoded_content, encoded_style, style_valid)
 
     def __call__(self, content_tokens: jax.Array, style_tokens: jax.Array):
         enc_c, _ = self.encode(content_tokens)

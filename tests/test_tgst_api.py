@@ -68,7 +68,8 @@ def test_training_again_in_one_process_reuses_the_compiled_steps(trained, tmp_pa
     traces = []
     for name in ("make_ae_train_step", "make_transformer_train_step"):  # called only while jit traces a step
         real = getattr(tgst_train, name)
-        monkeypatch.setattr(tgst_train, name, lambda *a, _real=real, _name=name: traces.append(_name) or _real(*a))
+        monkeypatch.setattr(tgst_train, name,
+                            lambda *a, _real=real, _name=name: traces.append(_name) or _real(*a))
     runs = [train_tgst(data, tmp_path / "a", ae_steps=1, transformer_steps=1)]
     first = list(traces)
     runs.append(train_tgst(data, tmp_path / "b", ae_steps=1, transformer_steps=1))

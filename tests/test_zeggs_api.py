@@ -315,7 +315,8 @@ def test_cli_generate_pca_and_errors(trained, tmp_path, copy_workdir, run_cli):
     r = run_cli(["zeggs", "generate", "--workdir", str(tmp_path / "none"), "--audio", audio, "--style", style,
                  "--out", str(tmp_path / "x.bvh")])
     assert r.returncode == 2 and "no ZeroEGGS model" in r.stderr
-    r = run_cli(["zeggs", "train", "--data", str(data), "--workdir", str(tmp_path / "w"), "--override", "gru=3"])
+    r = run_cli(["zeggs", "train", "--data", str(data), "--workdir", str(tmp_path / "w"),
+                 "--override", "gru=3"])
     assert r.returncode == 2 and "--override" in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 

@@ -16,9 +16,10 @@ Registry. ``BUILDERS`` maps a model name to ``builder(seed, batch_size) -> (stat
 ``state`` a fresh ``TrainState`` built from ``seed`` alone, ``step_fn`` the *un-jitted*
 ``(state, batch, key) -> (state, metrics)`` with a ``loss`` metric that averages over the batch, and
 ``batch_fn(i)`` the host-global numpy batch pytree of step ``i`` (every leaf ``(batch_size, ...)``), a pure
-function of ``(seed, i)``. To check another model (``tgst_ae``, ``tgst_transformer``, ``zeggs``), add a
-builder that uses its ``tiny`` preset and register it with ``@register("name")``; the test picks every
-registered name up through ``--list``.
+function of ``(seed, i)``. Two toys are registered (an MLP and a strided conv net): the mechanism of
+:mod:`jaxgest.parallel` does not depend on the model. The real models are checked through their ``train``
+entry points instead (tests/test_parallel.py, against the session's 1-device tiny models). Register another
+builder with ``@register("name")``; the test picks every registered name up through ``--list``.
 """
 
 from __future__ import annotations
@@ -129,113 +130,6 @@ def build_toy_conv1d(seed: int, batch_size: int):
     return state, _regression_step(module), batch_fn
 
 
-# ----- the real models (tiny presets on the built-in synthetic data) ---------------------------------------
-
-_DATA: dict = {}
-
-
-def _synthetic_dir() -> pathlib.Path:
-    """The built-in synthetic dataset (4 clips x 3 s, BVH + WAV), written once per process."""
-    if "dir" not in _DATA:
-        import tempfile
-
-        from jaxgest.motion.synthetic import write_dataset
-
-        folder = pathlib.Path(tempfile.mkdtemp(prefix="jaxgest_parallel_")) / "data"
-        write_dataset(folder, clips=4, seconds=3, progress=False)
-        _DATA["dir"] = folder
-    return _DATA["dir"]
-
-
-def _tgst_setup(batch_size: int):
-    """Tiny TGST config fitted to the synthetic data (as ``tgst train`` does); both batches ``batch_size``."""
-    import dataclasses
-
-    from jaxgest.tgst import data as tdata
-    from jaxgest.tgst.config import preset
-
-    if "tgst" not in _DATA:
-        cfg0 = preset("tiny")
-        body = tdata.load_body_data(_synthetic_dir(), cfg0)
-        _DATA["tgst"] = (tdata.fit_windows(cfg0, body), body)
-    cfg, body = _DATA["tgst"]
-    t = cfg.train
-    train = dataclasses.replace(t, autoencoder=dataclasses.replace(t.autoencoder, batch_size=batch_size),
-                                transformer=dataclasses.replace(t.transformer, batch_size=batch_size))
-    return dataclasses.replace(cfg, train=train), body
-
-
-def _tgst_params(cfg, seed: int):
-    from jaxgest.tgst.model import init_params
-
-    return jax.jit(init_params, static_argnames="cfg")(cfg=cfg.model, key=jax.random.key(seed))
-
-
-@register("tgst_ae")
-def build_tgst_ae(seed: int, batch_size: int):
-    """TGST motion autoencoder (tiny preset): the step and batches of ``jaxgest tgst train`` stage 1."""
-    import optax
-
-    from jaxgest.tgst import data as tdata
-    from jaxgest.tgst.steps import create_ae_state, make_ae_train_step
-
-    cfg, body = _tgst_setup(batch_size)
-    tx = optax.adam(cfg.train.autoencoder.learning_rate)
-    state = create_ae_state(cfg, _tgst_params(cfg, seed)["autoencoder"], tx)
-    return state, make_ae_train_step(cfg, tx), lambda i: tdata.ae_batch(body, cfg, seed, i)
-
-
-@register("tgst_transformer")
-def build_tgst_transformer(seed: int, batch_size: int):
-    """TGST style transformer (tiny preset) over a frozen autoencoder: stage 2 of ``jaxgest tgst train``."""
-    import optax
-
-    from jaxgest.tgst import data as tdata
-    from jaxgest.tgst.steps import create_transformer_state, make_transformer_train_step
-
-    cfg, body = _tgst_setup(batch_size)
-    tx = optax.adam(cfg.train.transformer.learning_rate)
-    params = _tgst_params(cfg, seed)
-    state = create_transformer_state(cfg, params["transformer"], tx)
-    step = make_transformer_train_step(cfg, tx, params["autoencoder"])
-    return state, step, lambda i: tdata.transformer_batch(body, cfg, seed, i)
-
-
-@register("zeggs")
-def build_zeggs(seed: int, batch_size: int):
-    """ZeroEGGS (tiny preset) on BVH + WAV: the RAdam step of ``zeggs train`` (dropout, VAE sample)."""
-    from jaxgest.motion.datasets import load_folder
-    from jaxgest.training import TrainState
-    from jaxgest.zeggs import data as zdata
-    from jaxgest.zeggs.config import preset
-    from jaxgest.zeggs.model import init_params
-    from jaxgest.zeggs.steps import make_optimizer, make_train_step, pose_stats
-
-    if "zeggs" not in _DATA:
-        clips = load_folder(_synthetic_dir())
-        cfg0 = preset("tiny", num_joints=clips[0].motion.skeleton.num_joints)
-        a = cfg0.train.speed_augmentation
-        _DATA["zeggs"] = zdata.build(clips, fps=cfg0.model.fps, mirror=cfg0.train.mirror,
-                                     speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,)), cfg0
-    data, cfg0 = _DATA["zeggs"]
-    cfg = cfg0.override(batch_size=batch_size)
-    t = cfg.train
-    tx = make_optimizer(cfg)
-    params = jax.jit(lambda k: init_params(cfg.model, k))(jax.random.key(seed))
-    state = TrainState.create(apply_fn=None, params=params, tx=tx).replace(step=jnp.asarray(0, jnp.int32))
-    stats = pose_stats(cfg.model, data.pose_stats.mean, data.pose_stats.std)
-    train_step = make_train_step(cfg)
-
-    def step(state, batch, key):
-        return train_step(state, batch, key, stats)
-
-    def batch_fn(i):
-        return data.batch(i, seed=seed, batch=t.batch_size, window=t.window,
-                          style_min=t.style_window_min, style_max=t.style_window_max)
-
-    return state, step, batch_fn
-
-
 def _layout(arr) -> dict:
     """How a (global) array lies on the devices: spec, shard row ranges, whether each shard holds its rows."""
     shards = sorted(arr.addressable_shards, key=lambda s: s.device.id)
@@ -338,25 +232,6 @@ def error_checks(args) -> dict:
     }
 
 
-def real_training(args, out: pathlib.Path) -> dict:
-    """``jaxgest tgst train`` / ``jaxgest zeggs train`` (the library entry points) on ``--devices``.
-
-    Two steps of each stage on the synthetic data; returns config.json and metrics.jsonl of both workdirs.
-    """
-    from jaxgest.tgst.train import train as tgst_train
-    from jaxgest.zeggs.train import train as zeggs_train
-
-    data = _synthetic_dir()
-    runs = {"tgst": out / "tgst_run", "zeggs": out / "zeggs_run"}
-    tgst_train(data, runs["tgst"], preset="tiny", ae_steps=2, transformer_steps=2, seed=args.seed,
-               devices=args.devices, progress=False, log_every=1, ckpt_every=2)
-    zeggs_train(data, runs["zeggs"], preset="tiny", steps=2, seed=args.seed, devices=args.devices,
-                progress=False, log_every=1)
-    return {k: {"config": json.loads((w / "config.json").read_text()),
-                "metrics": [json.loads(x) for x in (w / "metrics.jsonl").read_text().splitlines()]}
-            for k, w in runs.items()}
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser()
     p.add_argument("--model", action="append", help="registered model (repeatable; default all)")
@@ -368,9 +243,6 @@ def main(argv=None) -> int:
     p.add_argument("--host-devices", type=int, help="fake CPU devices (sets XLA_FLAGS before importing jax)")
     p.add_argument("--host-local", action="store_true", help="each host builds only its block of the batch")
     p.add_argument("--list", action="store_true", help="print the registered model names and exit")
-    p.add_argument("--real-train", action="store_true",
-                   help="also run the tgst/zeggs train() entry points on --devices (config.json, "
-                   "metrics.jsonl)")
     args = p.parse_args(argv)
     if args.list:
         print(json.dumps(sorted(BUILDERS)))
@@ -386,8 +258,6 @@ def main(argv=None) -> int:
                   "process_index": jax.process_index(), "errors": error_checks(args), "models": {}}
         for name in args.model or sorted(BUILDERS):
             report["models"][name] = run_model(name, args, out)
-        if args.real_train:
-            report["real_training"] = real_training(args, out)
     except JaxgestError as e:
         print(f"jaxgest: {e}", file=sys.stderr)
         return 2

@@ -95,19 +95,31 @@ def tiny_data(tmp_path_factory) -> pathlib.Path:
 
 
 @pytest.fixture(scope="session")
-def tgst_workdir(tiny_data, tmp_path_factory) -> pathlib.Path:
-    """Tiny TGST trained on ``tiny_data`` (4 + 4 steps, checkpoints 2 and 4 per stage); read-only."""
+def tgst_trained(tiny_data, tmp_path_factory) -> tuple:
+    """``(workdir, summary)``: tiny TGST trained on ``tiny_data`` (4 + 4 steps, checkpoints 2 and 4 per stage)
+    and what ``train`` returned; read-only."""
     work = tmp_path_factory.mktemp("tiny_tgst") / "tgst"
-    train_tgst(tiny_data, work)
-    return work
+    return work, train_tgst(tiny_data, work)
 
 
 @pytest.fixture(scope="session")
-def zeggs_workdir(tiny_data, tmp_path_factory) -> pathlib.Path:
-    """Tiny ZeroEGGS trained on ``tiny_data`` (4 steps, checkpoints 2 and 4); read-only."""
+def tgst_workdir(tgst_trained) -> pathlib.Path:
+    """The tiny TGST workdir of ``tgst_trained``; read-only."""
+    return tgst_trained[0]
+
+
+@pytest.fixture(scope="session")
+def zeggs_trained(tiny_data, tmp_path_factory) -> tuple:
+    """``(workdir, summary)``: tiny ZeroEGGS trained on ``tiny_data`` (4 steps, checkpoints 2 and 4) and what
+    ``train`` returned; read-only."""
     work = tmp_path_factory.mktemp("tiny_zeggs") / "zeggs"
-    train_zeggs(tiny_data, work)
-    return work
+    return work, train_zeggs(tiny_data, work)
+
+
+@pytest.fixture(scope="session")
+def zeggs_workdir(zeggs_trained) -> pathlib.Path:
+    """The tiny ZeroEGGS workdir of ``zeggs_trained``; read-only."""
+    return zeggs_trained[0]
 
 
 @pytest.fixture(scope="session")

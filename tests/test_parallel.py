@@ -1,13 +1,18 @@
 """Data-parallel training (jaxgest.parallel): 4 devices train to the parameters of 1 device.
 
-The test process has 4 fake CPU devices (tests/conftest.py, ``jax_num_cpu_devices``), so the worker of
-tests/_parallel_worker.py runs IN-PROCESS twice: on 1 device and on 4 devices (the 4-device run also calls
-the ``train`` entry points of both papers, to check that config.json and metrics.jsonl record the device
-count). Every model in the worker's registry is checked: two toys and the real ones (TGST autoencoder, TGST
-transformer, ZeroEGGS, tiny presets on the synthetic data). One true multi-process run remains (marked
-slow): 2 processes x 2 devices joined by ``jax.distributed`` (``JAX_COORDINATOR_ADDRESS`` on localhost),
-each host reading only its block of the batch, in subprocesses whose ``XLA_FLAGS`` give each 2 devices.
-The remaining in-process tests cover the mesh API and its errors.
+The test process has 4 fake CPU devices (tests/conftest.py, ``jax_num_cpu_devices``). Two layers are checked:
+
+* the mechanism: the worker of tests/_parallel_worker.py runs IN-PROCESS on 1 device and on 4 devices with
+  its two toy models (an MLP and a strided conv net; :mod:`jaxgest.parallel` knows nothing about the model):
+  same parameters and losses, the batch split in blocks over the devices, the state replicated, an all-reduce
+  in the compiled step, the device count in metrics.jsonl;
+* the real models: ``tgst.train.train`` and ``zeggs.train.train`` with ``devices=4`` and the session's tiny
+  settings (tests/tiny_models.py) end with the parameters and losses of the session's 1-device models
+  (tests/conftest.py), and config.json / metrics.jsonl record the 4 devices.
+
+One true multi-process run remains (marked slow): 2 processes x 2 devices joined by ``jax.distributed``
+(``JAX_COORDINATOR_ADDRESS`` on localhost), each host reading only its block of the batch, in subprocesses
+whose ``XLA_FLAGS`` give each 2 devices. The remaining in-process tests cover the mesh API and its errors.
 """
 
 from __future__ import annotations
@@ -30,16 +35,19 @@ from hypothesis import strategies as st
 
 from jaxgest import parallel
 from jaxgest.errors import JaxgestError
+from jaxgest.tgst.config import preset as tgst_preset
 from jaxgest.training import TrainState
+
+from faults_testing import params_at
+from tiny_models import TGST_STEPS, ZEGGS_STEPS, train_tgst, train_zeggs
 
 WORKER = pathlib.Path(__file__).with_name("_parallel_worker.py")
 _spec = importlib.util.spec_from_file_location("_parallel_worker", WORKER)
 worker = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(worker)
 MODELS = sorted(worker.BUILDERS)
-#: The 2-process run feeds the batch through the host-local path, which does not depend on the model: the
-#: toys and the TGST autoencoder cover it (the in-process 4-device run covers every model).
-HOST_MODELS = ["tgst_ae", "toy_conv1d", "toy_mlp"]
+#: The 2-process run feeds the batch through the host-local path, which does not depend on the model.
+HOST_MODELS = MODELS
 STEPS, BATCH, SEED = 4, 8, 3
 
 
@@ -99,7 +107,7 @@ def runs(hosts_started, tmp_path_factory):
     assert jax.device_count() == 4, "tests/conftest.py configures 4 fake CPU devices"
     root = tmp_path_factory.mktemp("parallel")
     assert worker.main(["--devices", "1"] + _worker_args(root / "one")) == 0
-    assert worker.main(["--devices", "4", "--real-train"] + _worker_args(root / "four")) == 0
+    assert worker.main(["--devices", "4"] + _worker_args(root / "four")) == 0
     return {"one": root / "one", "four": root / "four"}
 
 
@@ -129,37 +137,19 @@ def _info(folder: pathlib.Path) -> dict:
     return json.loads((folder / "info.json").read_text())
 
 
-#: Leaves whose gradient is identically zero in exact arithmetic, per model: the key bias of the TGST
-#: decoder's cross-attention (every logit of a query moves by the same q.b, and the softmax is invariant to
-#: that shift). Its float gradient is pure rounding noise, which Adam normalises into steps of +-lr in a
-#: direction that depends on the summation order, i.e. on the number of devices. Its movement is bounded
-#: by lr * steps instead of compared. (The encoder's key bias has a real gradient: the structure loss,
-#: eqs. 9-10, uses the encoder's keys themselves; it is compared like every other leaf.)
-ZERO_GRADIENT_LEAVES = {"tgst_transformer": {"['decoder']['key']['bias']"}}
-#: Adam learning rate of each real model's tiny preset (bounds the step of a zero-gradient leaf).
-LEARNING_RATE = {"tgst_transformer": 1e-3}
-
-
-def _assert_same_params(a: pathlib.Path, b: pathlib.Path, model: str = "", init: pathlib.Path = None) -> None:
-    """Same parameters up to float reassociation of the cross-device sums.
+def _assert_same_params(a: pathlib.Path, b: pathlib.Path, init: pathlib.Path) -> None:
+    """Same parameters (npz files of the worker) up to float reassociation of the cross-device sums.
 
     Adam divides each gradient element by its own magnitude, so an element whose gradient is tiny compared
     with the rounding error of the gradient sum can move differently (by up to lr per step); a handful of
     such elements are allowed per leaf (<= 0.2 %), each within 5 % of the largest movement of its leaf.
     """
-    pa, pb = np.load(a), np.load(b)
+    pa, pb, p0 = np.load(a), np.load(b), np.load(init)
     assert sorted(pa.files) == sorted(pb.files)
-    p0 = np.load(init) if init is not None else None
     for k in pa.files:
-        if k in ZERO_GRADIENT_LEAVES.get(model, ()):
-            # Adam moves an element by at most (1 - b1) / sqrt(1 - b2) * lr ~ 3.2 lr per step
-            bound = 3.2 * LEARNING_RATE[model] * STEPS
-            assert np.max(np.abs(pb[k] - pa[k])) <= 2 * bound, k
-            continue
         close = np.isclose(pb[k], pa[k], rtol=1e-5, atol=1e-6)
         if close.all():
             continue
-        assert p0 is not None, f"{k}: {np.count_nonzero(~close)} elements differ"
         moved = float(np.max(np.abs(pa[k] - p0[k])))
         worst = float(np.max(np.abs(pb[k] - pa[k])))
         assert np.count_nonzero(~close) <= max(1, 0.002 * close.size) and worst <= 0.05 * moved, (
@@ -167,16 +157,49 @@ def _assert_same_params(a: pathlib.Path, b: pathlib.Path, model: str = "", init:
             f"(largest movement {moved:.3g})")
 
 
+#: Adam divides each gradient element by its own magnitude, so an element whose gradient is tiny compared with
+#: the rounding error of the cross-device gradient sum can step by +-lr in a direction that depends on the
+#: summation order, i.e. on the number of devices. The TGST autoencoder and ZeroEGGS agree everywhere within
+#: rtol 1e-5 / atol 1e-6. The tiny TGST transformer has many small gradients: its elements agree within 2 %
+#: of one Adam step (atol 0.02 lr; measured <= 1e-5 with lr 1e-3) except a handful (<= 0.2 % of a leaf, each
+#: within Adam's bound (1 - b1) / sqrt(1 - b2) * lr ~ 3.2 lr per step of the other run), and the key bias of
+#: the decoder's cross-attention has a gradient that is identically zero in exact arithmetic (every logit of
+#: a query moves by the same q.b; the softmax is invariant to that shift): all of it is rounding noise, only
+#: bounded. (The encoder's key bias has a real gradient: the structure loss, eqs. 9-10, uses the encoder's
+#: keys themselves; it is compared like every other leaf.)
+_TR_LR = tgst_preset("tiny").train.transformer.learning_rate
+ADAM_NOISE = {"transformer": {"atol": 0.02 * _TR_LR, "handful": 0.002, "lr": _TR_LR,
+                              "zero_gradient": {"['params']['decoder']['key']['bias']"}}}
+STRICT = {"atol": 1e-6, "handful": 0.0, "lr": 0.0, "zero_gradient": set()}
+
+
+def _assert_same_checkpoint(one: pathlib.Path, four: pathlib.Path, stage: str, step: int) -> None:
+    """The parameters of two runs' checkpoints of ``stage`` at ``step`` agree up to float reassociation of
+    the cross-device sums (``ADAM_NOISE``, ``STRICT`` otherwise)."""
+    pa, pb = params_at(one / "checkpoints" / stage, step), params_at(four / "checkpoints" / stage, step)
+    assert sorted(pa) == sorted(pb)
+    params = [k for k in pa if k.startswith("['params']")]
+    noise = ADAM_NOISE.get(stage, STRICT)
+    assert params and noise["zero_gradient"] <= set(params)
+    for k in params:
+        differ = ~np.isclose(pb[k], pa[k], rtol=1e-5, atol=noise["atol"])
+        handful = int(noise["handful"] * differ.size) + (noise["handful"] > 0)
+        allowed = differ.size if k in noise["zero_gradient"] else handful
+        worst = float(np.max(np.abs(pb[k] - pa[k])))
+        within_adam = not differ.any() or worst <= 2 * 3.2 * noise["lr"] * step
+        assert np.count_nonzero(differ) <= allowed and within_adam, (
+            f"{stage} {k}: {np.count_nonzero(differ)} of {differ.size} elements differ, worst by {worst:.3g}")
+
+
 def test_every_registered_model_is_run(runs):
-    assert MODELS and {"toy_mlp", "toy_conv1d", "tgst_ae", "tgst_transformer", "zeggs"} <= set(MODELS)
-    assert set(HOST_MODELS) <= set(MODELS)
+    assert MODELS == ["toy_conv1d", "toy_mlp"] and HOST_MODELS == MODELS
     for run in runs.values():
         assert sorted(_info(run)["models"]) == MODELS
 
 
 @pytest.mark.parametrize("model", MODELS)
 def test_four_devices_train_like_one(runs, model):
-    _assert_same_params(runs["one"] / f"{model}.npz", runs["four"] / f"{model}.npz", model,
+    _assert_same_params(runs["one"] / f"{model}.npz", runs["four"] / f"{model}.npz",
                         runs["one"] / f"{model}_init.npz")
     one, four = _info(runs["one"])["models"][model], _info(runs["four"])["models"][model]
     # The loss is the mean over the GLOBAL batch on both: same numbers, not a per-device mean.
@@ -233,7 +256,7 @@ def test_two_hosts_train_like_one_device(runs, host_runs, model):
         assert (info["process_index"], info["device_count"], info["local_device_count"]) == (p, 4, 2)
         m = info["models"][model]
         assert m["device_info"] == {"devices": 4, "platform": "cpu", "processes": 2}
-        _assert_same_params(runs["one"] / f"{model}.npz", host_runs[f"host{p}"] / f"{model}.npz", model,
+        _assert_same_params(runs["one"] / f"{model}.npz", host_runs[f"host{p}"] / f"{model}.npz",
                             runs["one"] / f"{model}_init.npz")
         # Host p holds only its contiguous block of the global batch.
         per = BATCH // 4
@@ -244,17 +267,40 @@ def test_two_hosts_train_like_one_device(runs, host_runs, model):
         assert "a 2-process run uses all 4 devices" in info["errors"]["partial_mesh"]
 
 
+@pytest.fixture(scope="module")
+def real_runs(tiny_data, tmp_path_factory):
+    """The session's tiny TGST and ZeroEGGS trained again, same data, seed, steps and intervals, on 4
+    devices through the library entry points."""
+    root = tmp_path_factory.mktemp("parallel_real")
+    train_tgst(tiny_data, root / "tgst", devices=4)
+    train_zeggs(tiny_data, root / "zeggs", devices=4)
+    return {"tgst": root / "tgst", "zeggs": root / "zeggs"}
+
+
+#: per real model: stage (its checkpoint folder) -> the final step of the tiny run
+REAL_STAGES = {"tgst": {"autoencoder": TGST_STEPS["ae_steps"],
+                        "transformer": TGST_STEPS["transformer_steps"]},
+               "zeggs": {"zeggs": ZEGGS_STEPS}}
+
+
 @pytest.mark.parametrize("kind", ["tgst", "zeggs"])
-def test_train_entry_points_record_the_device_count(runs, kind):
-    """``tgst.train.train`` / ``zeggs.train.train`` with devices=4: config.json and every metrics line say
-    so."""
-    real = _info(runs["four"])["real_training"][kind]
-    assert {k: real["config"][k] for k in ("devices", "platform", "processes")} == {
+def test_real_models_train_on_four_devices_like_one(real_runs, tgst_workdir, zeggs_workdir, kind):
+    """``tgst.train.train`` / ``zeggs.train.train`` with devices=4: config.json and every metrics line say so,
+    and the losses and final parameters are those of the session's 1-device run."""
+    four, one = real_runs[kind], {"tgst": tgst_workdir, "zeggs": zeggs_workdir}[kind]
+    config = json.loads((four / "config.json").read_text())
+    assert {k: config[k] for k in ("devices", "platform", "processes")} == {
         "devices": 4, "platform": "cpu", "processes": 1}
-    stages = {"tgst": ["autoencoder", "autoencoder", "transformer", "transformer"],
-              "zeggs": ["zeggs", "zeggs"]}
-    assert [r["stage"] for r in real["metrics"]] == stages[kind]
-    assert all(r["devices"] == 4 and r["processes"] == 1 and np.isfinite(r["loss"]) for r in real["metrics"])
+    lines4, lines1 = ([json.loads(x) for x in (w / "metrics.jsonl").read_text().splitlines()]
+                      for w in (four, one))
+    assert [(r["stage"], r["step"]) for r in lines4] == [(r["stage"], r["step"]) for r in lines1]
+    assert [r["stage"] for r in lines4] == [s for s, n in REAL_STAGES[kind].items() for _ in range(n)]
+    assert all(r["devices"] == 4 and r["processes"] == 1 for r in lines4)
+    assert all(r["devices"] == 1 for r in lines1)
+    # The loss is the mean over the GLOBAL batch on both: same numbers, not a per-device mean.
+    np.testing.assert_allclose([r["loss"] for r in lines4], [r["loss"] for r in lines1], rtol=1e-5)
+    for stage, step in REAL_STAGES[kind].items():
+        _assert_same_checkpoint(one, four, stage, step)
 
 
 def _python_names(path: pathlib.Path) -> list:

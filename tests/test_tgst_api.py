@@ -12,21 +12,14 @@ import pytest
 from jaxgest import cli
 from jaxgest.errors import CheckpointError, DataError, JaxgestError
 from jaxgest.motion import bvh, datasets, kinematics
-from jaxgest.motion.synthetic import write_dataset
-
+from tiny_models import train_tgst
 
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory):
-    from jaxgest.tgst.train import train
-
-    root = tmp_path_factory.mktemp("tgst")
-    data = root / "data"
-    write_dataset(data, clips=4, seconds=3, progress=False)
-    work = root / "work"
-    summary = train(data, work, preset="tiny", ae_steps=4, transformer_steps=4, progress=False, log_every=2,
-                    ckpt_every=2)
-    return data, work, summary
+def trained(tiny_data, tgst_trained):
+    """The session's tiny TGST (tests/conftest.py: 4 + 4 steps, checkpoints every 2, metrics every step):
+    ``(data, workdir, summary)``; read-only (tests that train further copy the workdir)."""
+    return (tiny_data, *tgst_trained)
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +40,7 @@ def test_train_writes_config_metrics_checkpoints(trained):
     assert set(cfg["config"]) == {"name", "model", "train", "inference"}
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
     stages = [(r["stage"], r["step"]) for r in lines]
-    assert stages == [("autoencoder", 2), ("autoencoder", 4), ("transformer", 2), ("transformer", 4)]
+    assert stages == [("autoencoder", s) for s in (1, 2, 3, 4)] + [("transformer", s) for s in (1, 2, 3, 4)]
     assert all(np.isfinite(r["loss"]) for r in lines)
     assert summary["ae"]["steps"] == 4 and summary["transformer"]["steps"] == 4
     assert (work / "checkpoints/autoencoder").is_dir() and (work / "checkpoints/transformer").is_dir()
@@ -63,6 +56,25 @@ def test_resume_continues_from_saved_steps(trained, tmp_path):
                   ckpt_every=2)
     assert again["ae"]["start_step"] == 4 and again["ae"]["steps"] == 4  # finished stage 1 not retrained
     assert again["transformer"]["start_step"] == 4 and again["transformer"]["steps"] == 6
+
+
+def test_training_again_in_one_process_reuses_the_compiled_steps(trained, tmp_path, monkeypatch):
+    """jit's own cache serves every training of one config in a process (no memo of jitted steps in
+    tgst/train.py): over two trainings into fresh workdirs each stage's step is traced at most once (none when
+    the session's training already traced it), i.e. the second training traces nothing."""
+    from jaxgest.tgst import train as tgst_train
+
+    data = trained[0]
+    traces = []
+    for name in ("make_ae_train_step", "make_transformer_train_step"):  # called only while jit traces a step
+        real = getattr(tgst_train, name)
+        monkeypatch.setattr(tgst_train, name,
+                            lambda *a, _real=real, _name=name: traces.append(_name) or _real(*a))
+    runs = [train_tgst(data, tmp_path / "a", ae_steps=1, transformer_steps=1)]
+    first = list(traces)
+    runs.append(train_tgst(data, tmp_path / "b", ae_steps=1, transformer_steps=1))
+    assert all(r["ae"]["steps"] == 1 and r["transformer"]["steps"] == 1 for r in runs)
+    assert len(set(first)) == len(first) and traces == first, traces
 
 
 def test_another_model_on_same_workdir_is_refused(trained, tmp_path):

@@ -1,13 +1,12 @@
 """ZeroEGGS end to end on tiny synthetic data: train, resume, generate (API + CLI), blends, seeds, PCA, errors.
 
-One tiny model is trained once per module (6 steps); every other test reuses it and its compilations.
+The tests use the session's tiny model (tests/conftest.py: 4 steps, checkpoints 2 and 4, metrics every step)
+and its compilations; a test that trains further or writes into the workdir works on a copy.
 """
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -15,21 +14,11 @@ import soundfile as sf
 
 from jaxgest.errors import CheckpointError, JaxgestError
 from jaxgest.motion import bvh
-from jaxgest.motion.synthetic import write_dataset
-
-JAXGEST = [sys.executable, "-m", "jaxgest.cli"]
-
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory):
-    from jaxgest.zeggs.train import train
-
-    root = tmp_path_factory.mktemp("zeggs")
-    data = root / "data"
-    write_dataset(data, clips=4, seconds=4, progress=False)
-    work = root / "work"
-    summary = train(data, work, preset="tiny", steps=6, progress=False, log_every=3, ckpt_every=3)
-    return data, work, summary
+def trained(tiny_data, zeggs_trained):
+    """``(data, workdir, summary)`` of the session's tiny ZeroEGGS; read-only."""
+    return (tiny_data, *zeggs_trained)
 
 
 @pytest.fixture(scope="module")
@@ -41,18 +30,9 @@ def clips(trained):
 
 
 @pytest.fixture(scope="module")
-def with_pca(trained):
-    """The trained workdir with a PCA of its style embeddings (what `jaxgest zeggs pca` fits)."""
-    from jaxgest.motion.datasets import load_folder
-    from jaxgest.zeggs.inference import load_model
-    from jaxgest.zeggs.pca import fit_pca
-    from jaxgest.zeggs.probes import style_windows
-
-    data, work, _ = trained
-    model = load_model(work)
-    emb = np.concatenate([style_windows(model, c, 1.0) for c in load_folder(data)])
-    fit_pca(emb).save(work / "pca.json")
-    return work
+def with_pca(zeggs_pca_workdir):
+    """The trained workdir with a PCA of its style embeddings (``jaxgest zeggs pca``); read-only."""
+    return zeggs_pca_workdir
 
 
 def test_api_matches_spec():
@@ -69,19 +49,20 @@ def test_api_matches_spec():
     assert sig.parameters["workdir"].default is inspect.Parameter.empty
 
 
-def test_training_writes_everything_and_resumes(trained):
+def test_training_writes_everything_and_resumes(trained, copy_workdir):
     from jaxgest.zeggs.train import train
 
     data, work, summary = trained
     for name in ("config.json", "metrics.jsonl", "pose_stats.json", "speech_stats.json", "reference.bvh"):
         assert (work / name).is_file(), name
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
-    assert [r["step"] for r in lines] == [3, 6] and all(np.isfinite(r["loss"]) for r in lines)
-    assert lines[0]["devices"] == 1 and summary["start_step"] == 0
+    assert [r["step"] for r in lines] == [1, 2, 3, 4] and all(np.isfinite(r["loss"]) for r in lines)
+    assert lines[0]["devices"] == 1 and summary["start_step"] == 0 and summary["steps"] == 4
     # training and inference settings may change on resume (the checkpoint carries the model config only)
+    work = copy_workdir(work)
     again = train(data, work, preset="tiny", steps=8, progress=False, log_every=2, ckpt_every=2,
                   overrides={"learning_rate": 2e-3, "style_sampling": "overlap", "temperature": 0.5})
-    assert again["start_step"] == 6 and np.isfinite(again["final"]["loss"])
+    assert again["start_step"] == 4 and np.isfinite(again["final"]["loss"])
     stored = json.loads((work / "config.json").read_text())["config"]
     assert stored["train"]["learning_rate"] == 2e-3 and stored["inference"]["temperature"] == 0.5
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
@@ -264,18 +245,39 @@ def test_generate_on_the_zeggs_rig_from_real_audio(trained, zeggs_dir):
     assert np.all(np.isfinite(m.rotations))
 
 
-def _run(args, cwd):
-    return subprocess.run(JAXGEST + args, capture_output=True, text=True, timeout=600, cwd=cwd)
+class _Run:
+    """What a command line run left: exit status, stdout, stderr."""
+
+    def __init__(self, returncode, stdout, stderr):
+        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
+
+
+@pytest.fixture
+def run_cli(capsys):
+    """``run_cli(args) -> _Run``: ``jaxgest.cli.main`` in this process (its compilations are reused; the
+    console script itself is run by tests/test_cli_data.py and the resume tests)."""
+    from jaxgest.cli import main
+
+    def run(args):
+        capsys.readouterr()
+        try:
+            rc = main([str(a) for a in args])
+        except SystemExit as e:  # argparse
+            rc = e.code
+        out, err = capsys.readouterr()
+        return _Run(rc, out, err)
+
+    return run
 
 
 @pytest.mark.realdata
-def test_cli_generate_with_real_zeggs_audio(trained, zeggs_dir, tmp_path):
+def test_cli_generate_with_real_zeggs_audio(trained, zeggs_dir, tmp_path, run_cli):
     data, work, _ = trained
     style = str(sorted(data.glob("*.bvh"))[0])
     audio = zeggs_dir / "067_Speech_2_x_1_0.wav"
     out = tmp_path / "real.bvh"
-    r = _run(["zeggs", "generate", "--workdir", str(work), "--audio", str(audio), "--style", style,
-              "--out", str(out)], tmp_path)
+    r = run_cli(["zeggs", "generate", "--workdir", str(work), "--audio", str(audio), "--style", style,
+                 "--out", str(out)])
     assert r.returncode == 0, r.stderr
     info = sf.info(str(audio))
     m = bvh.load(out)
@@ -284,16 +286,17 @@ def test_cli_generate_with_real_zeggs_audio(trained, zeggs_dir, tmp_path):
 
 
 @pytest.mark.slow
-def test_cli_generate_pca_and_errors(trained, tmp_path):
+def test_cli_generate_pca_and_errors(trained, tmp_path, copy_workdir, run_cli):
     data, work, _ = trained
+    work = copy_workdir(work)
     style = str(sorted(data.glob("*.bvh"))[0])
     audio = str(sorted(data.glob("*.wav"))[0])
-    r = _run(["zeggs", "pca", "--workdir", str(work), "--data", str(data), "--window", "1"], tmp_path)
+    r = run_cli(["zeggs", "pca", "--workdir", str(work), "--data", str(data), "--window", "1"])
     assert r.returncode == 0, r.stderr
     assert "explained variance" in r.stdout and (work / "pca.json").is_file()
     out = tmp_path / "gen.bvh"
-    r = _run(["zeggs", "generate", "--workdir", str(work), "--audio", audio, "--style", style, "--style", style,
-              "--weights", "0.5,0.5", "--pca-edit", "0=1.5", "--seed", "2", "--out", str(out)], tmp_path)
+    r = run_cli(["zeggs", "generate", "--workdir", str(work), "--audio", audio, "--style", style, "--style", style,
+                 "--weights", "0.5,0.5", "--pca-edit", "0=1.5", "--seed", "2", "--out", str(out)])
     assert r.returncode == 0, r.stderr
     assert bvh.load(out).num_frames > 1
     bad = [
@@ -305,22 +308,23 @@ def test_cli_generate_pca_and_errors(trained, tmp_path):
     for extra, msg in bad:
         out2 = tmp_path / "bad.bvh"
         styles = ["--style", style, "--style", style] if extra[1] == "0,0" else ["--style", style]
-        r = _run(["zeggs", "generate", "--workdir", str(work), "--audio", audio, *styles,
-                  "--out", str(out2)] + extra, tmp_path)
+        r = run_cli(["zeggs", "generate", "--workdir", str(work), "--audio", audio, *styles,
+                     "--out", str(out2)] + extra)
         assert r.returncode == 2 and msg in r.stderr and "Traceback" not in r.stderr, (extra, r.stderr)
         assert len(r.stderr.strip().splitlines()) == 1 and not out2.exists()
-    r = _run(["zeggs", "generate", "--workdir", str(tmp_path / "none"), "--audio", audio, "--style", style,
-              "--out", str(tmp_path / "x.bvh")], tmp_path)
+    r = run_cli(["zeggs", "generate", "--workdir", str(tmp_path / "none"), "--audio", audio, "--style", style,
+                 "--out", str(tmp_path / "x.bvh")])
     assert r.returncode == 2 and "no ZeroEGGS model" in r.stderr
-    r = _run(["zeggs", "train", "--data", str(data), "--workdir", str(tmp_path / "w"), "--override", "gru=3"],
-             tmp_path)
+    r = run_cli(["zeggs", "train", "--data", str(data), "--workdir", str(tmp_path / "w"),
+                 "--override", "gru=3"])
     assert r.returncode == 2 and "--override" in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
-def test_train_cli_on_a_finished_workdir_says_nothing_to_do(trained, capsys):
+def test_train_cli_on_a_finished_workdir_says_nothing_to_do(trained, capsys, copy_workdir):
     from jaxgest.cli import main
 
     data, work, summary = trained
+    work = copy_workdir(work)
     before = (work / "metrics.jsonl").read_text()
     assert main(["zeggs", "train", "--data", str(data), "--workdir", str(work), "--preset", "tiny",
                  "--steps", str(summary["steps"])]) == 0

@@ -20,7 +20,6 @@ of 8). References: Kuriyama et al. 2022, §3.5, §4.1.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import pathlib
 import time
 from typing import Optional
@@ -103,14 +102,9 @@ def apply_overrides(cfg: Config, overrides: Optional[dict] = None) -> Config:
         raise JaxgestError(f"bad TGST config override: {e}") from None
 
 
-@functools.lru_cache(maxsize=8)
-def compiled_ae_step(cfg: Config, mesh):
-    """The jit-compiled, data-parallel autoencoder step of ``cfg`` on ``mesh`` and its optimizer.
-
-    Memoised so several trainings in one process (resume, tests) compile each step once.
-    """
-    tx = optax.adam(ae_learning_rate(cfg))
-    return parallel.parallelize_step(make_ae_train_step(cfg, tx), mesh), tx
+def ae_optimizer(cfg: Config) -> optax.GradientTransformation:
+    """The autoencoder's optimiser: Adam (§3.5) at :func:`ae_learning_rate`."""
+    return optax.adam(ae_learning_rate(cfg))
 
 
 def ae_learning_rate(cfg: Config):
@@ -125,23 +119,46 @@ def ae_learning_rate(cfg: Config):
                                               decay_steps=n, end_value=0.1 * t.learning_rate)
 
 
-@functools.lru_cache(maxsize=8)
-def compiled_transformer_step(cfg: Config, mesh):
-    """The jit-compiled transformer step ``(state, batch, key, ae_params) -> (state, metrics)`` and tx.
+def transformer_optimizer(cfg: Config) -> optax.GradientTransformation:
+    """The transformer's optimiser: Adam (§3.5) at ``cfg.train.transformer.learning_rate``."""
+    return optax.adam(cfg.train.transformer.learning_rate)
 
-    :func:`jaxgest.tgst.steps.make_transformer_train_step` closes over the frozen autoencoder; here the
-    autoencoder parameters are a (replicated, not differentiated) argument instead, so one compilation
-    serves every autoencoder (resumed runs, tests). Same shardings as
-    :func:`jaxgest.parallel.parallelize_step`, state donated.
-    """
-    tx = optax.adam(cfg.train.transformer.learning_rate)
 
-    def step(state, batch, key, ae_params):
-        return make_transformer_train_step(cfg, tx, ae_params)(state, batch, key)
+# The two jitted steps. The optimiser is built INSIDE the step from the (frozen, hashable, static) config and
+# the state passed in carries neither ``tx`` nor ``apply_fn`` (:func:`_bare`): both are static fields of a
+# TrainState, i.e. part of the jit cache key, and a fresh ``optax.adam`` / module per ``train`` call would
+# never match it. The cache key is then (config, shapes, shardings) and jit's own cache serves every training
+# of one config in a process (resume, tests); nothing is memoised here.
 
+def _bare(state):
+    """``state`` without its static fields (optimiser object, apply function): params, opt_state, step."""
+    return state.replace(apply_fn=None, tx=None)
+
+
+def _ae_step(state, batch, key, cfg: Config):
+    tx = ae_optimizer(cfg)
+    state, metrics = make_ae_train_step(cfg, tx)(state.replace(tx=tx), batch, key)
+    return _bare(state), metrics
+
+
+def _transformer_step(state, batch, key, ae_params, cfg: Config):
+    """:func:`jaxgest.tgst.steps.make_transformer_train_step` closes over the frozen autoencoder; here its
+    parameters are a (replicated, not differentiated) argument, so one compilation serves every
+    autoencoder (resumed runs, tests)."""
+    tx = transformer_optimizer(cfg)
+    state, metrics = make_transformer_train_step(cfg, tx, ae_params)(state.replace(tx=tx), batch, key)
+    return _bare(state), metrics
+
+
+def jitted_step(step, mesh, cfg: Config, extra_args: int = 0):
+    """``step`` (:func:`_ae_step`; :func:`_transformer_step` with ``extra_args=1``) jit-compiled
+    data-parallel over ``mesh``, ``cfg`` bound: ``(state, batch, key, *extra) -> (state, metrics)``, with the
+    shardings of :func:`jaxgest.parallel.parallelize_step` (state, key and extra arguments replicated, batch
+    split, state donated). ``state`` must be :func:`_bare`."""
     rep, data = parallel.replicated(mesh), parallel.data_sharding(mesh)
-    jitted = jax.jit(step, in_shardings=(rep, data, rep, rep), out_shardings=(rep, rep), donate_argnums=(0,))
-    return jitted, tx
+    jitted = jax.jit(step, in_shardings=(rep, data, rep) + (rep,) * extra_args, out_shardings=(rep, rep),
+                     static_argnums=(3 + extra_args,), donate_argnums=(0,))
+    return lambda state, batch, key, *extra: jitted(state, batch, key, *extra, cfg)
 
 
 def _int32_step(state):
@@ -217,8 +234,9 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
                "windows": {"ae": cfg.train.autoencoder.window, "transformer": cfg.train.transformer.window}}
 
     # ---- stage 1: autoencoder
-    ae_step_fn, tx_ae = compiled_ae_step(cfg, mesh)
-    ae_state = parallel.replicate(_int32_step(create_ae_state(cfg, params0["autoencoder"], tx_ae)), mesh)
+    ae_step_fn = jitted_step(_ae_step, mesh, cfg)
+    ae_state = parallel.replicate(
+        _bare(_int32_step(create_ae_state(cfg, params0["autoencoder"], ae_optimizer(cfg)))), mesh)
     ae_state = ae_ckpt.restore(ae_state)
     ae_logger = training.MetricsLogger(workdir, extra={"stage": "autoencoder", **info})
     last = {}
@@ -230,12 +248,12 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     ae_params = parallel.replicate(jax.device_get(ae_state.params), mesh)
     ae_ckpt.close()
 
-    # ---- stage 2: transformer (autoencoder frozen, closed over by the step)
+    # ---- stage 2: transformer (autoencoder frozen, a step argument)
     summary["stale_transformer"] = set_aside_stale_transformer(workdir, stored_transformer, ae_done)
     tr_ckpt = transformer_checkpointer(workdir, cfg.model, ae_done)
-    tr_step_fn, tx_tr = compiled_transformer_step(cfg, mesh)
-    tr_state = parallel.replicate(
-        _int32_step(create_transformer_state(cfg, params0["transformer"], tx_tr)), mesh)
+    tr_step_fn = jitted_step(_transformer_step, mesh, cfg, extra_args=1)
+    tr_state = create_transformer_state(cfg, params0["transformer"], transformer_optimizer(cfg))
+    tr_state = parallel.replicate(_bare(_int32_step(tr_state)), mesh)
     tr_state = tr_ckpt.restore(tr_state)
     tr_logger = training.MetricsLogger(workdir, extra={"stage": "transformer", **info})
     tr_state, summary["transformer"] = _run_stage(

@@ -30,6 +30,7 @@ import optax
 
 from jaxgest import parallel, training
 from jaxgest.errors import DataError, JaxgestError
+from jaxgest.tgst import autoencoder
 from jaxgest.tgst import data as tdata
 from jaxgest.tgst.config import Config, preset as get_preset
 from jaxgest.tgst.model import init_params
@@ -223,10 +224,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
         params0 = dict(params0, autoencoder=dict(params0["autoencoder"], **{k: jnp.asarray(v)
                                                                            for k, v in stats.items()}))
     if cfg.model.autoencoder.linear_path and cfg.train.autoencoder.pca_init:  # start at the block PCA
-        from jaxgest.tgst.autoencoder import init_linear_path
-
         copies = 2 if cfg.train.autoencoder.mirror else 1
-        params0 = dict(params0, autoencoder=init_linear_path(
+        params0 = dict(params0, autoencoder=autoencoder.init_linear_path(
             params0["autoencoder"], cfg.model.autoencoder, (body_data.upper + body_data.mirrored_upper)[
                 :copies * len(body_data.upper)], (body_data.lower + body_data.mirrored_lower)[
                 :copies * len(body_data.lower)]))

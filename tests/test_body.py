@@ -212,3 +212,20 @@ def test_memoised_rig_data_is_read_only():
         with pytest.raises(ValueError, match="read-only"):
             a[0] = 0
     assert B.body_tpose().flags.writeable  # derived arrays are the caller's own
+
+
+def test_other_memoised_structures_are_read_only():
+    """The synthetic rig and the FK level plan are memoised too: no caller can change them for another."""
+    from jaxgest.motion import kinematics
+    from jaxgest.motion import synthetic
+
+    rig = synthetic._rig()
+    for a in (rig.ref, rig.axis):
+        with pytest.raises(ValueError, match="read-only"):
+            a[0] = 0
+    with pytest.raises(TypeError):
+        rig.lengths["upper_L"] = 0.0
+    levels, where = kinematics._fk_levels(tuple(int(p) for p in B.body_skeleton().parents))
+    for a in (where, levels[1][0], levels[1][1]):
+        with pytest.raises(ValueError, match="read-only"):
+            a[0] = 0

@@ -96,9 +96,9 @@ def fk_positions(rotations: jax.Array, translations: jax.Array, parents: Sequenc
 
 
 @functools.lru_cache(maxsize=64)
-def _fk_levels(parents: tuple) -> tuple[list, np.ndarray]:
-    """Joints grouped by depth: ``[(indices, parent positions within the previous level), ...]`` and the
-    permutation from level order back to file order."""
+def _fk_levels(parents: tuple) -> tuple[tuple, np.ndarray]:
+    """Joints grouped by depth: ``((indices, parent positions within the previous level), ...)`` and the
+    permutation from level order back to file order (memoised; every array read-only)."""
     depth = []
     for j, p in enumerate(parents):
         if p >= j:
@@ -112,7 +112,10 @@ def _fk_levels(parents: tuple) -> tuple[list, np.ndarray]:
         levels.append((idx, par))
         pos = {int(j): i for i, j in enumerate(idx)}
     order = np.concatenate([idx for idx, _ in levels])
-    return levels, np.argsort(order)
+    inverse = np.argsort(order)
+    for arr in [inverse, *(a for level in levels for a in level)]:
+        arr.flags.writeable = False  # memoised and shared by every caller: read-only
+    return tuple(levels), inverse
 
 
 def joint_velocities(positions: np.ndarray, fps: float) -> np.ndarray:

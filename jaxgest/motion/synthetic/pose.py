@@ -19,6 +19,7 @@ the floor (y = 0).
 from __future__ import annotations
 
 import dataclasses
+import types
 
 import numpy as np
 
@@ -67,6 +68,13 @@ class Rig:
     ref: np.ndarray  # (J, 3, 3) reference world orientations
     axis: np.ndarray  # (J, 3) local bone direction (towards the main child)
     lengths: dict  # bone lengths (cm) used by the IK
+
+    def __post_init__(self):  # shared through a memo (synthetic._rig): read-only, so no caller can change it
+        for name in ("ref", "axis"):
+            arr = np.array(getattr(self, name), dtype=np.float64)
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "lengths", types.MappingProxyType(dict(self.lengths)))
 
     def idx(self, name):
         return self.skeleton.index(name)

@@ -23,7 +23,6 @@ Special keys (not config fields):
 """
 from __future__ import annotations
 
-import ast
 import json
 import pathlib
 import sys
@@ -33,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from overrides import parse_value
 
 HERE = pathlib.Path(__file__).resolve().parent
 OUT = HERE / "out"
@@ -78,13 +78,6 @@ def subset(data, keep):
                     data.fps, [data.contents[i] for i in keep])
 
 
-def _value(v):
-    if v.lower() in ("true", "false"):
-        return v.lower() == "true"
-    try:
-        return ast.literal_eval(v)
-    except (ValueError, SyntaxError):
-        return v
 
 
 def pca_angles(data, clips, components=16):
@@ -223,7 +216,7 @@ if __name__ == "__main__":
     if sys.argv[1] == "cache":
         cache(sys.argv[2], sys.argv[3])
     elif sys.argv[1] == "run":
-        run(sys.argv[2], int(sys.argv[3]), {k: _value(v) for k, v in (a.split("=", 1) for a in sys.argv[4:])})
+        run(sys.argv[2], int(sys.argv[3]), {k: parse_value(v) for k, v in (a.split("=", 1) for a in sys.argv[4:])})
     elif sys.argv[1] != "table":
         sys.exit("ae_cause.py: cache | run | table")
 

@@ -11,7 +11,6 @@ shortened to STEPS (``ae_lr_decay_steps=STEPS``) so a short run ends at the sche
 than ``fit`` (e.g. ``preset=fit-pca``).
 Evaluate with diagnose.py WORKDIR EVAL_DIR OUT.json TRAIN_DIR --no-swap.
 """
-import ast
 import pathlib
 import sys
 
@@ -19,23 +18,16 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 from jaxgest.tgst import data as tdata  # noqa: E402
 from jaxgest.tgst.train import format_summary, train  # noqa: E402
+from overrides import parse_value  # noqa: E402
 
 
-def _value(v):
-    """``"32"`` -> 32, ``"(64,32,32)"`` -> (64, 32, 32), ``"true"`` -> True, other text as is."""
-    if v.lower() in ("true", "false"):
-        return v.lower() == "true"
-    try:
-        return ast.literal_eval(v)
-    except (ValueError, SyntaxError):
-        return v
 
 
 if __name__ == "__main__":
     mode, train_dir, workdir, steps, seed = sys.argv[1:6]
     steps, seed = int(steps), int(seed)
     overrides = {"ae_lr_decay_steps": steps}
-    overrides.update({k: _value(v) for k, v in (a.split("=", 1) for a in sys.argv[6:])})
+    overrides.update({k: parse_value(v) for k, v in (a.split("=", 1) for a in sys.argv[6:])})
     preset = overrides.pop("preset", "fit")
     if mode == "none":
         overrides["ae_mirror"] = False

@@ -8,20 +8,12 @@ config overrides (Python literals), e.g. ``train.transformer.style_tokens=clip_a
 clip + its mirror as one token set, as the authors' trainer) or ``train.transformer.style_tokens=window``.
 """
 import argparse
-import ast
 import sys
 
 from jaxgest.tgst.train import format_summary, train
+from overrides import parse_value
 
 
-def _value(v):
-    """``"32"`` -> 32, ``"(64,32,32)"`` -> (64, 32, 32), ``"true"`` -> True, other text as is."""
-    if v.lower() in ("true", "false"):
-        return v.lower() == "true"
-    try:
-        return ast.literal_eval(v)
-    except (ValueError, SyntaxError):
-        return v
 
 
 if __name__ == "__main__":
@@ -32,7 +24,7 @@ if __name__ == "__main__":
     ap.add_argument("--preset", default="fit")
     ap.add_argument("overrides", nargs="*")
     a = ap.parse_intermixed_args()
-    overrides = {k: _value(v) for k, v in (o.split("=", 1) for o in a.overrides)}
+    overrides = {k: parse_value(v) for k, v in (o.split("=", 1) for o in a.overrides)}
     print(f"overrides {overrides}, ablate {a.ablate}", flush=True)
     print(format_summary(train(a.train_dir, a.workdir, preset=a.preset, ae_steps=a.ae_steps,
                                transformer_steps=a.tr_steps, seed=a.seed, progress=False, log_every=50,

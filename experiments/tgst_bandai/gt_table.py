@@ -4,8 +4,8 @@
 
 Reads PREFIX_{intra,inter}_s<SEED>.json (authors' protocol) and PREFIX_{intra,inter}_world_s<SEED>.json (world
 protocol; PREFIX default ``eval``, e.g. ``eval_fitpca``); per method and control the mean over pairs of the
-per-pair mean content / style errors against the content and style clips and against the ground truth (the dataset clip of the content in the target style;
-intra: the style clip itself).
+per-pair mean content / style errors against the content and style clips and against the ground truth (the
+dataset clip of the content in the target style; intra: the style clip itself).
 """
 import json
 import pathlib

@@ -1,11 +1,11 @@
 """Ground-truth columns under both protocols, seed 0: markdown from the evaluation JSON files.
 
-    python experiments/tgst_bandai/gt_table.py RESULTS_DIR [SEED]
+    python experiments/tgst_bandai/gt_table.py RESULTS_DIR [SEED] [PREFIX]
 
-Reads eval_{intra,inter}_s<SEED>.json (authors' protocol) and eval_{intra,inter}_world_s<SEED>.json (world
-protocol); per method and control the mean over pairs of the per-pair mean content / style errors against the
-content and style clips and against the ground truth (the dataset clip of the content in the target style;
-intra: the style clip itself).
+Reads PREFIX_{intra,inter}_s<SEED>.json (authors' protocol) and PREFIX_{intra,inter}_world_s<SEED>.json (world
+protocol; PREFIX default ``eval``, e.g. ``eval_fitpca``); per method and control the mean over pairs of the
+per-pair mean content / style errors against the content and style clips and against the ground truth (the
+dataset clip of the content in the target style; intra: the style clip itself).
 """
 import json
 import pathlib
@@ -26,8 +26,9 @@ def cells(report, name):
 
 def main(argv):
     folder, seed = pathlib.Path(argv[1]), (argv[2] if len(argv) > 2 else "0")
+    prefix = argv[3] if len(argv) > 3 else "eval"
     for label, tag in (("authors (0.3 s cut)", ""), ("world", "_world")):
-        files = [folder / f"eval_{p}{tag}_s{seed}.json" for p in ("intra", "inter")]
+        files = [folder / f"{prefix}_{p}{tag}_s{seed}.json" for p in ("intra", "inter")]
         if not all(f.exists() for f in files):
             continue
         intra, inter = (json.loads(f.read_text()) for f in files)

@@ -1,4 +1,4 @@
-"""orbax checkpoints of one trained stage, with a stored and checked meta item; workdir format checks.
+"""orbax checkpoints of one trained stage, with a stored and checked meta item.
 
 :class:`Checkpointer` wraps an orbax ``CheckpointManager`` over ``workdir/<subdir>`` keeping
 ``{params, opt_state, step}`` plus a JSON ``meta`` item holding the kind of model, its config and the
@@ -8,8 +8,7 @@ line: a checkpoint that cannot be read (truncated, corrupted -- each stores a sh
 missing files) is skipped for the newest readable one with a one-line warning (:func:`strict_checkpoints` /
 ``--strict``: an error instead), a save that cannot complete (disk full, read-only) is a
 :class:`~jaxgest.errors.WriteError` with no partial folder left, and a workdir or checkpoint stamped with a
-newer ``format_version`` (:data:`FORMAT_VERSION`; absent = 1) or naming an unknown model is refused
-(:func:`check_workdir_config`).
+newer ``format_version`` or naming an unknown model is refused (:mod:`jaxgest.workdir_format`).
 
 No process-wide side effects: absl logging is quietened only around the orbax calls that log expected
 noise (:func:`jaxgest.orbax_noise.quiet_absl`), and the filter of asyncio's "Event loop is closed" errors
@@ -34,44 +33,15 @@ import jax
 import numpy as np
 
 from jaxgest.errors import CheckpointError, WriteError
-from jaxgest.io import json_default
 from jaxgest.orbax_noise import closed_loop_errors_muted, quiet_absl
+from jaxgest.workdir_format import FORMAT_VERSION, check_workdir_config, config_diff, normalise
 
 __all__ = [
     "Checkpointer",
-    "FORMAT_VERSION",
-    "MODELS",
-    "ModelCache",
     "all_finite",
-    "check_workdir_config",
-    "config_diff",
     "strict_checkpoints",
     "warn",
 ]
-
-def _normalise(obj):
-    """JSON round trip so tuples/lists and numpy scalars compare equal to what was stored."""
-    return json.loads(json.dumps(obj, sort_keys=True, default=json_default))
-
-
-def config_diff(stored: Mapping, requested: Mapping, prefix: str = "") -> list[str]:
-    """Flattened ``key: stored -> requested`` descriptions of every differing field (sorted)."""
-    out = []
-    keys = sorted(set(stored) | set(requested))
-    for k in keys:
-        a, b = stored.get(k, "<absent>"), requested.get(k, "<absent>")
-        name = f"{prefix}{k}"
-        if isinstance(a, Mapping) and isinstance(b, Mapping):
-            out.extend(config_diff(a, b, prefix=name + "."))
-        elif a != b:
-            out.append(f"{name}: {a!r} -> {b!r}")
-    return out
-
-
-FORMAT_VERSION = 1
-MODELS = ("tgst", "zeggs")  # what config.json's "model" (earlier TGST workdirs: "kind") may name
-"""Workdir format written by this version (``"format_version"`` in config.json and in each checkpoint's meta;
-absent = 1). A workdir stamped with a newer version is refused with a one-line error."""
 
 _STRICT = contextvars.ContextVar("jaxgest_strict_checkpoints", default=False)
 
@@ -216,7 +186,7 @@ class Checkpointer:
         self.read_only = read_only
         self.strict = strict
         self.restored_step: Optional[int] = None  # the step the last restore used
-        self.meta = _normalise({"kind": kind, "config": dict(config), "skeleton": skeleton})
+        self.meta = normalise({"kind": kind, "config": dict(config), "skeleton": skeleton})
         check_workdir_config(self.workdir, kind, lenient=True)
         if read_only and not self.directory.is_dir():
             raise CheckpointError(f"{self.workdir}: no checkpoint found (missing {self.directory.name}/)")
@@ -301,7 +271,7 @@ class Checkpointer:
             problems.append(f"skeleton signature: {stored.get('skeleton')} -> {self.meta['skeleton']}")
         stored_config = stored.get("config") or {}
         if self.read_config is not None:
-            stored_config = _normalise(dict(self.read_config(stored_config)))
+            stored_config = normalise(dict(self.read_config(stored_config)))
         a = {k: v for k, v in stored_config.items() if k not in self.ignore}
         b = {k: v for k, v in self.meta["config"].items() if k not in self.ignore}
         diff = config_diff(a, b)
@@ -571,48 +541,6 @@ def _write_reason(e: BaseException) -> str:
     return _reason(first)
 
 
-def check_workdir_config(workdir, kind: Optional[str] = None, *, lenient: bool = False) -> Optional[dict]:
-    """The workdir's config.json as a dict (None when there is none), after the format checks.
-
-    One-line :class:`CheckpointError` when it is not valid JSON (``lenient``: None instead -- a checkpointer
-    leaves that to the loader, and training rewrites the file), when it carries a ``format_version`` newer
-    than :data:`FORMAT_VERSION` (absent = 1), when it names no model this version knows, or another model
-    than ``kind`` (``"tgst_autoencoder"`` -> ``tgst``; kinds outside :data:`MODELS` are not checked).
-    """
-    workdir = pathlib.Path(workdir)
-    path = workdir / "config.json"
-    if not path.is_file():
-        return None
-    try:
-        stored = json.loads(path.read_text())
-        if not isinstance(stored, dict):
-            raise ValueError("not a JSON object")
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        why = (e.strerror if isinstance(e, OSError) and e.strerror else
-               "not valid JSON: truncated or corrupted?")
-        if lenient:
-            return None
-        raise CheckpointError(f"{path}: unreadable ({why}); restore it from a backup or retrain into a new "
-                              "--workdir") from None
-    version = stored.get("format_version", 1)
-    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
-        raise CheckpointError(f"{path}: format_version {version!r} is not a version number; retrain into a "
-                              "new --workdir")
-    if version > FORMAT_VERSION:
-        raise CheckpointError(f"{workdir}: written by a newer jaxgest (workdir format {version}, this "
-                              f"version reads up to {FORMAT_VERSION}); upgrade jaxgest, or retrain into a new "
-                              "--workdir")
-    model = stored.get("model", stored.get("kind"))  # "kind": TGST workdirs of earlier versions
-    if model not in MODELS:
-        raise CheckpointError(f"{workdir}: config.json names {'no model' if model is None else repr(model)} "
-                              f"(this jaxgest knows {', '.join(MODELS)}): an older layout or not a jaxgest "
-                              "workdir; retrain into a new --workdir")
-    family = (kind or "").split("_")[0]
-    if family in MODELS and model != family:
-        raise CheckpointError(f"{workdir}: a {model} workdir, not a {family} one; use another --workdir")
-    return stored
-
-
 def _abstract_like(x):
     x = jax.numpy.asarray(x) if not hasattr(x, "shape") else x
     sharding = getattr(x, "sharding", None)
@@ -625,32 +553,3 @@ def all_finite(tree) -> jax.Array:
     leaves = [jax.numpy.all(jax.numpy.isfinite(x)) for x in jax.tree_util.tree_leaves(tree)
               if jax.numpy.issubdtype(x.dtype, jax.numpy.inexact)]
     return jax.numpy.all(jax.numpy.stack(leaves)) if leaves else jax.numpy.bool_(True)
-
-
-class ModelCache:
-    """An explicit cache of models loaded from workdirs, reloaded when a workdir's checkpoints change.
-
-    ``load(workdir)`` loads a model; ``version(workdir)`` is a cheap, hashable description of the workdir's
-    checkpoints (a directory listing, no arrays read). ``get(workdir)`` returns the cached model while the
-    version is unchanged and loads again otherwise (dropping that workdir's older versions); at most
-    ``maxsize`` models are kept, least recently used dropped first. Owned by its caller.
-    """
-
-    def __init__(self, load: Callable[[Any], Any], version: Callable[[Any], Any], maxsize: int):
-        self._load, self._version, self.maxsize = load, version, int(maxsize)
-        self._models: dict = {}
-
-    def get(self, workdir):
-        path = str(pathlib.Path(workdir).resolve())
-        key = (path, self._version(workdir))
-        model = self._models.pop(key, None)
-        if model is None:
-            model = self._load(workdir)
-            self._models = {k: v for k, v in self._models.items() if k[0] != path}  # its older versions
-        self._models[key] = model  # most recently used last
-        while len(self._models) > self.maxsize:
-            self._models.pop(next(iter(self._models)))
-        return model
-
-    def clear(self) -> None:
-        self._models.clear()

@@ -31,8 +31,9 @@ import jax
 import numpy as np
 from flax.training.train_state import TrainState  # noqa: F401  (re-exported: the state every step uses)
 
-from jaxgest.checkpoint import (FORMAT_VERSION, MODELS, Checkpointer, all_finite,  # noqa: F401  (re-exported)
-                                check_workdir_config, config_diff, strict_checkpoints, warn)
+from jaxgest.checkpoint import Checkpointer, all_finite, strict_checkpoints, warn  # noqa: F401  (re-exported)
+from jaxgest.workdir_format import (FORMAT_VERSION, MODELS, check_workdir_config,  # noqa: F401  (re-exported)
+                                    config_diff)
 from jaxgest.errors import TrainingError, WriteError
 from jaxgest.io import write_error, write_json_atomic  # noqa: F401  (write_json_atomic re-exported)
 

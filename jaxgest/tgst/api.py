@@ -33,7 +33,7 @@ from typing import Optional
 import jax
 import numpy as np
 
-from jaxgest import checkpoint
+from jaxgest import model_cache
 from jaxgest.errors import DataError
 from jaxgest.motion import body, datasets
 from jaxgest.motion import kinematics as K
@@ -180,8 +180,8 @@ def load_model(workdir) -> TGSTModel:
     return TGSTModel(config.model, params, workdir, config=config, steps=steps)
 
 
-class ModelCache(checkpoint.ModelCache):
-    """Loaded TGST models (:class:`jaxgest.checkpoint.ModelCache`), keyed on the workdir and the checkpoint
+class ModelCache(model_cache.ModelCache):
+    """Loaded TGST models (:class:`jaxgest.model_cache.ModelCache`), keyed on the workdir and the checkpoint
     steps of both stages: a stage with a newer (or other) step is reloaded, an unchanged workdir is not."""
 
     def __init__(self, maxsize: int = 4):

@@ -24,7 +24,8 @@ from typing import Mapping, Optional, Union
 
 import jax
 
-from jaxgest.checkpoint import Checkpointer, check_workdir_config
+from jaxgest.checkpoint import Checkpointer
+from jaxgest.workdir_format import check_workdir_config
 from jaxgest.errors import CheckpointError
 from jaxgest.tgst import data as tdata
 from jaxgest.tgst.config import Config, ModelConfig, legacy_to_dict, model_config_from_dict

@@ -20,7 +20,7 @@ from typing import Optional, Sequence, Union
 import jax
 import numpy as np
 
-from jaxgest import checkpoint
+from jaxgest import model_cache
 from jaxgest.errors import JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.skeleton import Motion
@@ -50,8 +50,8 @@ def _as_motions(styles) -> list[Motion]:
     return out
 
 
-class ModelCache(checkpoint.ModelCache):
-    """Loaded ZeroEGGS models (:class:`jaxgest.checkpoint.ModelCache`), keyed on the workdir, its newest
+class ModelCache(model_cache.ModelCache):
+    """Loaded ZeroEGGS models (:class:`jaxgest.model_cache.ModelCache`), keyed on the workdir, its newest
     checkpoint step and that step folder's modification time: a run that trains further (a new step) or is
     retrained into the same workdir (a rewritten step folder) is loaded again."""
 

@@ -1,9 +1,4 @@
-"""Eager PyTorch peers of the two models, loaded with the SAME weights as the JAX models (``[bench]`` extra).
-
-This module imports ``torch`` at the top: only the benchmark suite imports it, and only when torch is
-installed (:func:`available`); ``jaxgest`` itself never does.
-
-TGST (:class:`TGSTPeer`): the network as the authors wrote it (``nn/autoencoder.py``, ``nn/transformer.py``,
+"""TGST (:class:`TGSTPeer`): the network as the authors wrote it (``nn/autoencoder.py``, ``nn/transformer.py``,
 ``nn/gsxf.py`` of their public code): ``Encoder`` (Conv1d k1 / k3 s2 / k3 s2, GELU), the two ``Decoder``\\ s
 (Upsample x2 linear, ConvTranspose1d k3 p1, GELU, ..., ConvTranspose1d k1), ``TransformerEncoder``
 (CLS token, constant positional table added along the batch axis, ONE LayerNorm per block used before the
@@ -15,16 +10,6 @@ by ``edge_frames`` at both ends (SPEC §3), the style latents are cut to the rea
 merged back with jaxgest's per-frame linear cross-fade (:func:`jaxgest.tgst.tokens.detokenize`; the
 authors' ``linear_blending`` ramps over the 32 flattened values of a half token instead). The JAX side of
 the comparison runs ``transformer.variant="authors"`` (the same network).
-
-ZeroEGGS (:class:`ZeggsPeer`): the official generator (``ZEGGS/modules.py``): ``CellStateEncoder``
-(3 Linear, ELU) for the initial hidden state, then per frame ``RecurrentDecoderNormal`` -- ``layer0``
-Linear + ELU on ``[pose, speech, style]``, a 2-layer ``nn.GRU`` (``batch_first``, one time step per call,
-as ``Decoder.forward`` loops over frames) on ``[hidden, pose, speech, style]``, ``layer2`` Linear -- and the
-root integration in torch. The pose input is jaxgest's (``[pose * input scale, facing in the root frame]``)
-so the same weights apply; the official code builds it with ``vectorize_input`` from its own features.
-
-Both run under ``torch.inference_mode()`` in float32 on the CPU with ``torch.set_num_threads`` set by the
-caller (:func:`set_threads`).
 """
 
 from __future__ import annotations
@@ -34,17 +19,8 @@ import math
 import numpy as np
 import torch
 import torch.nn as nn
-import torch.nn.functional as F
 
-
-def set_threads(n: int) -> int:
-    """Intra-op threads of torch (the XLA CPU client uses every core of the process): returns n."""
-    torch.set_num_threads(int(n))
-    return torch.get_num_threads()
-
-
-def _t(a) -> torch.Tensor:
-    return torch.from_numpy(np.array(a, dtype=np.float32, copy=True))
+from benchmarks.torch_peers.common import tensor
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -260,20 +236,20 @@ def load_tgst(cfg, params) -> TGSTPeer:
     ae, tr = params["autoencoder"], params["transformer"]
 
     def conv(mod, k, b):  # flax (k, in, out) -> Conv1d (out, in, k)
-        mod.weight.copy_(_t(np.asarray(k).transpose(2, 1, 0)))
-        mod.bias.copy_(_t(b))
+        mod.weight.copy_(tensor(np.asarray(k).transpose(2, 1, 0)))
+        mod.bias.copy_(tensor(b))
 
     def conv_t(mod, k, b):  # flax (k, in, out) -> ConvTranspose1d (in, out, k) of the flipped kernel
-        mod.weight.copy_(_t(np.asarray(k)[::-1].transpose(1, 2, 0)))
-        mod.bias.copy_(_t(b))
+        mod.weight.copy_(tensor(np.asarray(k)[::-1].transpose(1, 2, 0)))
+        mod.bias.copy_(tensor(b))
 
     def lin(mod, *denses):  # flax Dense kernels (in, out) concatenated along out -> Linear (out, in)
-        mod.weight.copy_(_t(np.concatenate([np.asarray(d["kernel"]) for d in denses], axis=1).T))
-        mod.bias.copy_(_t(np.concatenate([np.asarray(d["bias"]) for d in denses])))
+        mod.weight.copy_(tensor(np.concatenate([np.asarray(d["kernel"]) for d in denses], axis=1).T))
+        mod.bias.copy_(tensor(np.concatenate([np.asarray(d["bias"]) for d in denses])))
 
     def ln(mod, p):
-        mod.weight.copy_(_t(p["scale"]))
-        mod.bias.copy_(_t(p["bias"]))
+        mod.weight.copy_(tensor(p["scale"]))
+        mod.bias.copy_(tensor(p["bias"]))
 
     with torch.no_grad():
         enc = ae["encoder"]
@@ -288,7 +264,7 @@ def load_tgst(cfg, params) -> TGSTPeer:
         lin(peer.tr_encoder.fc_o, e["out"])
         lin(peer.tr_encoder.mlp[0], e["mlp"]["fc_0"])
         lin(peer.tr_encoder.mlp[2], e["mlp"]["fc_1"])
-        peer.tr_encoder.cls_token.copy_(_t(np.asarray(e["cls"])[None]))
+        peer.tr_encoder.cls_token.copy_(tensor(np.asarray(e["cls"])[None]))
         ln(peer.tr_decoder.layer_nrm, d["ln"])
         lin(peer.tr_decoder.fc_q, d["query"])
         lin(peer.tr_decoder.fc_kv, d["key"], d["value"])
@@ -305,151 +281,5 @@ def tgst_call(peer: TGSTPeer):
         with torch.inference_mode():
             up, lo = peer(torch.from_numpy(np.array(content)), torch.from_numpy(np.array(style)))
         return up.numpy(), lo.numpy()
-
-    return run
-
-
-# --------------------------------------------------------------------------------------------------------
-# ZeroEGGS: the official generator
-# --------------------------------------------------------------------------------------------------------
-class RecurrentDecoderNormal(nn.Module):
-    """``ZEGGS/modules.py`` RecurrentDecoderNormal (one frame per call)."""
-
-    def __init__(self, pose_input_size, speech_size, style_size, output_size, hidden_size, num_rnn_layers):
-        super().__init__()
-        all_input_size = pose_input_size + speech_size + style_size
-        self.layer0 = nn.Linear(all_input_size, hidden_size)
-        self.layer1 = nn.GRU(all_input_size + hidden_size, hidden_size, num_rnn_layers, batch_first=True)
-        self.layer2 = nn.Linear(hidden_size, output_size)
-
-    def forward(self, pose, speech, style, cell_state):
-        hidden = F.elu(self.layer0(torch.cat([pose, speech, style], dim=-1)))
-        cell_output, cell_state = self.layer1(torch.cat([hidden, pose, speech, style], dim=-1).unsqueeze(1),
-                                              cell_state)
-        output = self.layer2(cell_output.squeeze(1))
-        return output, cell_state
-
-
-class CellStateEncoder(nn.Module):
-    """``ZEGGS/modules.py`` CellStateEncoder."""
-
-    def __init__(self, input_size, hidden_size, num_rnn_layers):
-        super().__init__()
-        self.num_rnn_layers = num_rnn_layers
-        self.layer0 = nn.Linear(input_size, hidden_size)
-        self.layer1 = nn.Linear(hidden_size, hidden_size)
-        self.layer2 = nn.Linear(hidden_size, hidden_size * num_rnn_layers)
-
-    def forward(self, pose, style):
-        hidden = F.elu(self.layer0(torch.cat([pose, style], dim=-1)))
-        hidden = F.elu(self.layer1(hidden))
-        output = self.layer2(hidden)
-        return output.reshape(output.shape[0], self.num_rnn_layers, -1).swapaxes(0, 1).contiguous()
-
-
-def quat_mul(a, b):
-    aw, ax, ay, az = a.unbind(-1)
-    bw, bx, by, bz = b.unbind(-1)
-    return torch.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                        aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], dim=-1)
-
-
-def quat_rotate(q, v):
-    w, u = q[..., :1], q[..., 1:]
-    t = 2.0 * torch.cross(u, v, dim=-1)
-    return v + w * t + torch.cross(u, t, dim=-1)
-
-
-def quat_inv(q):
-    return torch.cat([q[..., :1], -q[..., 1:]], dim=-1)
-
-
-def expmap_to_quat(v):
-    t2 = torch.sum(v * v, dim=-1, keepdim=True)
-    small = t2 < 1e-8
-    t = torch.sqrt(torch.where(small, torch.ones_like(t2), t2))
-    half_sinc = torch.where(small, 0.5 - t2 / 48.0, torch.sin(0.5 * t) / t)
-    w = torch.where(small, 1.0 - t2 / 8.0, torch.cos(0.5 * t))
-    return torch.cat([w, v * half_sinc], dim=-1)
-
-
-class ZeggsPeer(nn.Module):
-    """The official generator loop: initial hidden state, then per frame decoder + root integration."""
-
-    def __init__(self, cfg):
-        super().__init__()
-        self.cfg = cfg
-        pin = cfg.pose_dim + cfg.facing_dim
-        H = cfg.gru_hidden
-        if cfg.init_hidden != H:
-            raise ValueError("the official CellStateEncoder has hidden size = GRU size")
-        self.cell_state_encoder = CellStateEncoder(pin + cfg.style_embedding, H, cfg.gru_layers)
-        self.recurrent_decoder = RecurrentDecoderNormal(pin, cfg.speech_embedding, cfg.style_embedding,
-                                                        cfg.pose_dim, H, cfg.gru_layers)
-        lay = cfg.layout
-        self.vel = torch.as_tensor(np.arange(cfg.pose_dim)[lay.root_velocity])
-        self.ang = torch.as_tensor(np.arange(cfg.pose_dim)[lay.root_angular_velocity])
-
-    def forward(self, speech, style, pose0, root_position0, root_rotation0, facing, mean, std, in_scale):
-        dt = 1.0 / self.cfg.fps
-        pose, pos, rot = pose0, root_position0, root_rotation0
-        state = self.cell_state_encoder(torch.cat([pose * in_scale, quat_rotate(quat_inv(rot), facing)], -1),
-                                        style)
-        poses, positions, rotations = [pose], [pos], [rot]
-        vel_m, vel_s = mean[self.vel], std[self.vel]
-        ang_m, ang_s = mean[self.ang], std[self.ang]
-        for i in range(1, speech.shape[1]):
-            x = torch.cat([pose * in_scale, quat_rotate(quat_inv(rot), facing)], dim=-1)
-            pose, state = self.recurrent_decoder(x, speech[:, i], style, state)
-            vel = pose[:, self.vel] * vel_s + vel_m
-            ang = pose[:, self.ang] * ang_s + ang_m
-            rot = quat_mul(expmap_to_quat(quat_rotate(rot, ang) * dt), rot)
-            rot = rot / torch.clamp(torch.linalg.norm(rot, dim=-1, keepdim=True), min=1e-12)
-            pos = pos + quat_rotate(rot, vel) * dt
-            poses.append(pose)
-            positions.append(pos)
-            rotations.append(rot)
-        return torch.stack(poses, 1), torch.stack(positions, 1), torch.stack(rotations, 1)
-
-
-def load_zeggs(cfg, params) -> ZeggsPeer:
-    """A :class:`ZeggsPeer` holding the JAX generator parameters (``params["generator"]``)."""
-    peer = ZeggsPeer(cfg).eval()
-    g = params["generator"]
-    ini, dec = g["initializer"], g["decoder"]
-
-    def lin(mod, p):
-        mod.weight.copy_(_t(np.asarray(p["kernel"]).T))
-        mod.bias.copy_(_t(p["bias"]))
-
-    with torch.no_grad():
-        for i in range(3):
-            lin(getattr(peer.cell_state_encoder, f"layer{i}"), ini[f"layer{i}"])
-        rd = peer.recurrent_decoder
-        lin(rd.layer0, dec["input_layer"])
-        lin(rd.layer2, dec["output_layer"])
-        for i in range(cfg.gru_layers):
-            gp = dec[f"gru{i}"]
-            getattr(rd.layer1, f"weight_ih_l{i}").copy_(_t(np.asarray(gp["input"]["kernel"]).T))
-            getattr(rd.layer1, f"bias_ih_l{i}").copy_(_t(gp["input"]["bias"]))
-            getattr(rd.layer1, f"weight_hh_l{i}").copy_(_t(np.asarray(gp["hidden"]["kernel"]).T))
-            getattr(rd.layer1, f"bias_hh_l{i}").copy_(_t(gp["hidden"]["bias"]))
-    return peer
-
-
-def zeggs_call(peer: ZeggsPeer, in_scale: np.ndarray):
-    """``f(params, speech, style, pose0, root_position0, root_rotation0, facing) -> dict`` (NumPy out).
-
-    Identity normalisation (mean 0, std 1), as the benchmark's JAX generator call."""
-    P = peer.cfg.pose_dim
-    mean, std = torch.zeros(P), torch.ones(P)
-    scale = _t(in_scale)
-
-    def run(_params, speech, style, pose0, root_position0, root_rotation0, facing):
-        args = [torch.from_numpy(np.array(a, np.float32)) for a in
-                (speech, style, pose0, root_position0, root_rotation0, facing)]
-        with torch.inference_mode():
-            y, p, q = peer(*args, mean, std, scale)
-        return {"pose": y.numpy(), "root_position": p.numpy(), "root_rotation": q.numpy()}
 
     return run

@@ -2,8 +2,9 @@
 
 ``python -m benchmarks.zeggs_formats [BATCH]`` (env ``T`` generated frames, default 60; ``ROUNDS``, default
 7): the paper preset with the benchmark's random weights, ``fp32`` (the model, jit), ``bf16``, ``int8``
-(with its C++ kernel at batch <= 4 when available) and ``int8_xla`` (the same params traced with the kernel
-switched off), timed in interleaved rounds; prints the median wall and process-CPU time per frame, their
+(with its C++ kernel at batch <= 4 when available, rows split over XLA's intra-op pool), ``int8_1t`` (the
+kernel on the calling thread only) and ``int8_xla`` (the same params traced with the kernel switched off),
+timed in interleaved rounds; prints the median wall and process-CPU time per frame, their
 ratios against fp32, the max |pose difference| against fp32 and the load average.
 """
 
@@ -23,19 +24,28 @@ from jaxgest.zeggs import int8_kernel
 
 def main(batch: int = 1, frames: int = 60, rounds: int = 7) -> dict:
     args = Z.generator_inputs(Z.CFG, batch, frames, seed=0)
-    gen, gen_xla = jax.jit(Z._generate_fn(Z.CFG)), jax.jit(Z._generate_fn(Z.CFG))
+    gen, gen_1t, gen_xla = (jax.jit(Z._generate_fn(Z.CFG)) for _ in range(3))
     impls = {"fp32": (gen, Z._params()), "bf16": (gen, peers._quantized("bf16")),
-             "int8": (gen, peers._quantized("int8")), "int8_xla": (gen_xla, peers._quantized("int8"))}
+             "int8": (gen, peers._quantized("int8")), "int8_1t": (gen_1t, peers._quantized("int8")),
+             "int8_xla": (gen_xla, peers._quantized("int8"))}
     kernel = int8_kernel.available()
     ref = np.asarray(gen(Z._params(), *args)["pose"])
     diff = {}
+    outs = {}
     for name, (f, p) in impls.items():
-        if name == "int8_xla":  # trace (and compile) with the kernel off; later calls reuse that executable
+        # trace (and compile) int8_xla with the kernel off, int8_1t with one worker; later calls reuse them
+        if name == "int8_xla":
             int8_kernel.available = lambda: False
+        if name == "int8_1t":
+            int8_kernel.threads = lambda: 1
         try:
-            diff[name] = float(np.max(np.abs(np.asarray(f(p, *args)["pose"]) - ref)))
+            outs[name] = np.asarray(f(p, *args)["pose"])
+            diff[name] = float(np.max(np.abs(outs[name] - ref)))
         finally:
-            int8_kernel.available = available
+            int8_kernel.available, int8_kernel.threads = available, threads
+    if kernel:
+        print(f"int8 kernel: pose of 2 workers == 1 worker bit for bit: "
+              f"{bool(np.array_equal(outs['int8'], outs['int8_1t']))}")
     wall = {k: [] for k in impls}
     cpu = {k: [] for k in impls}
     load0 = os.getloadavg()
@@ -55,7 +65,7 @@ def main(batch: int = 1, frames: int = 60, rounds: int = 7) -> dict:
     return {"wall": wall, "cpu": cpu, "diff": diff}
 
 
-available = int8_kernel.available
+available, threads = int8_kernel.available, int8_kernel.threads
 
 if __name__ == "__main__":
     main(int(sys.argv[1]) if len(sys.argv) > 1 else 1, int(os.environ.get("T", 60)),

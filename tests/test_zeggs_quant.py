@@ -78,6 +78,36 @@ def test_int8_kernel_equals_the_xla_path(group, rows, monkeypatch):
     np.testing.assert_allclose(slow, want, rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("group,rows", [(32, 1), (16, 4), (24, 2)])
+def test_int8_kernel_threads_give_the_same_bits(group, rows):
+    """Rows split across XLA's intra-op pool (chunks of >= 64 kB of weights: 1027 x 256 int8 makes several
+    chunks, 1027 is not a multiple of 4) give bit-identical outputs for any number of workers, in a plain
+    call and inside a scan (the generator's loop)."""
+    from jaxgest.zeggs import int8_kernel
+
+    if not int8_kernel.available():
+        pytest.skip("no C++ compiler: the int8 kernel is not built")
+    rng = np.random.default_rng(group + rows)
+    n_in, n_out = 250, 1027
+    qk = Q.quantize_kernel(rng.normal(size=(n_in, n_out)).astype(np.float32), "int8", group=group)
+    x = jnp.asarray(rng.normal(size=(rows, n_in)), jnp.float32)
+
+    def scanned(n):
+        def step(c, _):
+            y = int8_kernel.gemv(c, qk.w, qk.scale, num_threads=n)
+            return jnp.tanh(y[:, :n_in]), y
+        return jax.jit(lambda x0: jax.lax.scan(step, x0, None, length=3)[1])
+
+    want = np.asarray(x, np.float64) @ np.asarray(Q.dequantize(qk), np.float64)
+    one = np.asarray(jax.jit(lambda a: int8_kernel.gemv(a, qk.w, qk.scale, num_threads=1))(x))
+    np.testing.assert_allclose(one, want, rtol=1e-5, atol=1e-4)
+    loop_one = np.asarray(scanned(1)(x))
+    for n in (0, 2, 3):
+        many = np.asarray(jax.jit(lambda a: int8_kernel.gemv(a, qk.w, qk.scale, num_threads=n))(x))
+        np.testing.assert_array_equal(many, one)
+        np.testing.assert_array_equal(np.asarray(scanned(n)(x)), loop_one)
+
+
 def test_int8_kernel_without_a_compiler_is_not_built(monkeypatch, tmp_path):
     from jaxgest.zeggs import int8_kernel
 

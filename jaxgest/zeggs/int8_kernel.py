@@ -15,8 +15,15 @@ and the weight format runs through XLA (same numbers up to float reassociation).
 
 Layout: ``q (out, in_padded)`` int8 row-major (input channels contiguous), ``scale (out, in_padded / G)``
 float32, groups of G consecutive input channels; ``x (rows, in)`` float32 with ``in <= in_padded`` (the
-padded weights are zero). Single-threaded (on a loaded machine a second thread waiting at a barrier costs
-more than it gains).
+padded weights are zero).
+
+Threads: the output rows are cut into chunks (multiples of 4 rows, >= 64 kB of weights, ~8 per worker)
+that the calling thread and helper tasks scheduled on XLA's own intra-op thread pool (``ffi::ThreadPool``
+from the FFI execution context; no thread is created per call) claim from an atomic counter. The caller
+never waits for a task that has not started (it takes the remaining chunks itself and waits only for
+chunks being computed), so a busy or descheduled pool thread costs at most one chunk, and the pool cannot
+deadlock. Each output row is computed exactly as single-threaded (same 4-row blocks, same order): the
+result does not depend on the number of workers (:func:`threads`, ``$JAXGEST_INT8_THREADS``).
 
 References: Jacob et al. 2018 (weight-only integer quantisation); the XLA FFI (``jax.ffi``).
 """
@@ -35,13 +42,18 @@ from typing import Optional
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 TARGET = "jaxgest_int8_gemv"
 MAX_ROWS = 4  # batch rows up to which the kernel is used (it streams the weights once per row)
 
 SOURCE = r"""
+#include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <cstring>
+#include <memory>
+#include <thread>
 #include <vector>
 #if defined(__AVX512F__)
 #include <immintrin.h>
@@ -96,8 +108,29 @@ static void rows(const float* xp, const int8_t* q, const float* sc, float* y, in
   }
 }
 
-static ffi::Error Impl(ffi::Buffer<ffi::F32> x, ffi::Buffer<ffi::S8> q, ffi::Buffer<ffi::F32> scale,
-                       ffi::ResultBuffer<ffi::F32> y) {
+// One call's work, shared with the pool's helper tasks (which may start after the call has returned: they
+// hold the state through a shared_ptr and find no chunk left).
+struct Job {
+  const int8_t* q; const float* sc; float* y;
+  int64_t O, Kp, NG, G, B, chunk, nchunks;
+  std::vector<float> xp;  // B rows of x, zero-padded to Kp
+  std::atomic<int64_t> next{0}, done{0};
+};
+
+// Claim chunks of output rows until none is left (every batch row of a chunk: its weights are read while hot).
+static void work(Job* j) {
+  for (;;) {
+    const int64_t c = j->next.fetch_add(1, std::memory_order_relaxed);
+    if (c >= j->nchunks) return;
+    const int64_t n0 = c * j->chunk, n1 = std::min(j->O, n0 + j->chunk);
+    for (int64_t b = 0; b < j->B; ++b)
+      rows(j->xp.data() + b * j->Kp, j->q, j->sc, j->y + b * j->O, n0, n1, j->Kp, j->NG, j->G);
+    j->done.fetch_add(1, std::memory_order_release);
+  }
+}
+
+static ffi::Error Impl(ffi::ThreadPool pool, ffi::Buffer<ffi::F32> x, ffi::Buffer<ffi::S8> q,
+                       ffi::Buffer<ffi::F32> scale, ffi::ResultBuffer<ffi::F32> y, int64_t threads) {
   auto qd = q.dimensions();
   auto xd = x.dimensions();
   if (qd.size() != 2 || scale.dimensions().size() != 2 || xd.size() != 2)
@@ -105,21 +138,52 @@ static ffi::Error Impl(ffi::Buffer<ffi::F32> x, ffi::Buffer<ffi::S8> q, ffi::Buf
   const int64_t O = qd[0], Kp = qd[1], NG = scale.dimensions()[1], K = xd[1], B = xd[0];
   if (NG <= 0 || Kp % NG != 0 || K > Kp || scale.dimensions()[0] != O)
     return ffi::Error(ffi::ErrorCode::kInvalidArgument, "int8 gemv: inconsistent shapes");
-  const int64_t G = Kp / NG;
-  std::vector<float> xp(Kp, 0.f);
-  for (int64_t b = 0; b < B; ++b) {
-    std::memcpy(xp.data(), x.typed_data() + b * K, K * sizeof(float));
-    rows(xp.data(), q.typed_data(), scale.typed_data(), y->typed_data() + b * O, 0, O, Kp, NG, G);
+  auto job = std::make_shared<Job>();
+  job->q = q.typed_data(); job->sc = scale.typed_data(); job->y = y->typed_data();
+  job->O = O; job->Kp = Kp; job->NG = NG; job->G = Kp / NG; job->B = B;
+  job->xp.assign(B * Kp, 0.f);
+  for (int64_t b = 0; b < B; ++b)
+    std::memcpy(job->xp.data() + b * Kp, x.typed_data() + b * K, K * sizeof(float));
+  // Workers: the caller plus helpers on XLA's intra-op pool (threads <= 0: the pool's size). Chunks are
+  // multiples of 4 rows (the 4-row blocks of `rows` fall where they fall single-threaded: same results),
+  // at least kMinChunkBytes of weights each, about 8 per worker so that a late or descheduled helper holds
+  // little work; small products run in the caller alone.
+  constexpr int64_t kMinChunkBytes = 64 * 1024;
+  int64_t workers = threads > 0 ? threads : pool.num_threads();
+  workers = std::max<int64_t>(1, std::min<int64_t>(workers, O / 4));
+  int64_t chunk = O, nchunks = 1;
+  if (workers > 1) {
+    chunk = std::max<int64_t>((O / (8 * workers) + 3) / 4 * 4, (kMinChunkBytes / Kp + 3) / 4 * 4);
+    chunk = std::max<int64_t>(chunk, 4);
+    nchunks = (O + chunk - 1) / chunk;
+    if (nchunks < 2) { chunk = O; nchunks = 1; }
+  }
+  job->chunk = chunk; job->nchunks = nchunks;
+  if (nchunks > 1) {
+    for (int64_t t = 1; t < std::min(workers, nchunks); ++t) pool.Schedule([job] { work(job.get()); });
+  }
+  work(job.get());
+  // Every chunk is claimed; wait only for the ones a helper is running now (never for a queued task).
+  for (int spins = 0; job->done.load(std::memory_order_acquire) < nchunks; ++spins) {
+    if (spins < 4096) {
+#if defined(__x86_64__)
+      __builtin_ia32_pause();
+#endif
+    } else {
+      std::this_thread::yield();
+    }
   }
   return ffi::Error::Success();
 }
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(JaxgestInt8Gemv, Impl,
                               ffi::Ffi::Bind()
+                                  .Ctx<ffi::ThreadPool>()
                                   .Arg<ffi::Buffer<ffi::F32>>()
                                   .Arg<ffi::Buffer<ffi::S8>>()
                                   .Arg<ffi::Buffer<ffi::F32>>()
-                                  .Ret<ffi::Buffer<ffi::F32>>());
+                                  .Ret<ffi::Buffer<ffi::F32>>()
+                                  .Attr<int64_t>("threads"));
 """
 
 
@@ -188,8 +252,19 @@ def available() -> bool:
     return True
 
 
-def gemv(x: jax.Array, q: jax.Array, scale: jax.Array) -> jax.Array:
+def threads() -> int:
+    """Workers per call (traced into the call): ``$JAXGEST_INT8_THREADS``, default 0 = the size of XLA's
+    intra-op pool (every core of the process); 1 = the caller's thread only."""
+    try:
+        return max(0, int(os.environ.get("JAXGEST_INT8_THREADS", "0")))
+    except ValueError:
+        return 0
+
+
+def gemv(x: jax.Array, q: jax.Array, scale: jax.Array, *, num_threads: Optional[int] = None) -> jax.Array:
     """``x (rows, in) float32`` times the int8 kernel ``q (out, in_padded)`` with group ``scale``:
-    ``(rows, out)`` float32 (call only when :func:`available`)."""
+    ``(rows, out)`` float32 (call only when :func:`available`). ``num_threads``: workers (default
+    :func:`threads`; 0 = XLA's intra-op pool size); the result does not depend on it."""
+    n = threads() if num_threads is None else max(0, int(num_threads))
     return jax.ffi.ffi_call(TARGET, jax.ShapeDtypeStruct((x.shape[0], q.shape[0]), jnp.float32))(
-        x.astype(jnp.float32), q, scale)
+        x.astype(jnp.float32), q, scale, threads=np.int64(n))

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgest.motion import rotations
-from jaxgest.nn import safe_norm
+from jaxgest.nn import gelu_exact, safe_norm
 from jaxgest.tgst.config import AutoencoderConfig
 
 
@@ -60,7 +60,7 @@ class _ConvStack(nn.Module):
             pad = _pytorch_padding(k)
             x = nn.Conv(feat, kernel_size=(k,), strides=(s,), padding=pad, name=f"conv_{i}")(x)
             if i < n - 1 or self.final_activation:
-                x = nn.gelu(x, approximate=False)
+                x = gelu_exact(x)
         return x
 
 

@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgest.nn import gelu_exact
 from jaxgest.nn import sinusoidal_positions  # noqa: F401  (eq. 2; re-exported)
 from jaxgest.tgst.config import TransformerConfig
 
@@ -151,7 +152,7 @@ class _MLP(nn.Module):
 
     @nn.compact
     def __call__(self, x):
-        return nn.Dense(self.dim, name="fc_1")(nn.gelu(nn.Dense(self.dim, name="fc_0")(x), approximate=False))
+        return nn.Dense(self.dim, name="fc_1")(gelu_exact(nn.Dense(self.dim, name="fc_0")(x)))
 
 
 def _layernorms(count: int):

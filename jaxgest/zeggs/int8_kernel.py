@@ -117,7 +117,7 @@ struct Job {
   std::atomic<int64_t> next{0}, done{0};
 };
 
-// Claim chunks of output rows until none is left (every batch row of a chunk: its weights are read while hot).
+// Claim chunks of output rows until none is left (all batch rows of a chunk while its weights are hot).
 static void work(Job* j) {
   for (;;) {
     const int64_t c = j->next.fetch_add(1, std::memory_order_relaxed);

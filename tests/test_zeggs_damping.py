@@ -78,3 +78,26 @@ def test_loss_part_on_the_tiny_model(zeggs_workdir, tiny_data):
     mae = out["mae_group_units"]
     assert mae["previous_true_frame"]["all"] < mae["mean_pose"]["all"]
     assert set(out["reconstruction_minus_model"]) == {"model_e0", "mean_pose", "hold_frame0", "previous_true_frame"}
+
+
+def test_small_preset_speech_encoder_sees_half_a_second_ahead():
+    """The synthetic gestures start up to ~0.9 s before the speech onset they are timed to: with +-8 frames of
+    speech (kernels 3, 15) the small model's rollout stayed over-damped. The small preset's speech embedding
+    at frame t must depend on the speech ~0.5 s later (and earlier), and not beyond its receptive field."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxgest.zeggs.config import preset
+    from jaxgest.zeggs.speech_encoder import SpeechEncoder
+
+    cfg = preset("small").model
+    reach = sum((k - 1) // 2 for k in cfg.speech_kernels)  # frames seen on each side
+    assert reach >= 0.5 * cfg.fps
+    enc = SpeechEncoder(cfg)
+    x = jax.random.normal(jax.random.key(0), (1, 4 * reach, cfg.speech_dim))
+    params = enc.init(jax.random.key(1), x)
+    t = reach + 2
+    base = enc.apply(params, x)[0, t]
+    for offset, changes in ((reach, True), (-reach, True), (reach + 1, False), (-(reach + 1), False)):
+        y = enc.apply(params, x.at[0, t + offset].add(5.0))[0, t]
+        assert bool(jnp.any(jnp.abs(y - base) > 1e-6)) is changes, offset

@@ -63,7 +63,6 @@ def test_compare_damping_pairs_clips(tmp_path, capsys):
     assert "+0.200 ± 0.100" in line  # differences 0.1 and 0.3: mean 0.2, SE std(ddof=1) / sqrt(2) = 0.1
 
 
-@pytest.mark.slow
 def test_loss_part_on_the_tiny_model(zeggs_workdir, tiny_data):
     dd = _module("damping_diagnostic")
     from jaxgest.motion.datasets import load_folder

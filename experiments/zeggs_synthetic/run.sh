@@ -55,6 +55,8 @@ done
     --json "$OUT/probe_diagnostics.json" | tee "$OUT/probe_diagnostics.md"
 "$PY" experiments/zeggs_synthetic/frechet_diagnostic.py --workdir "$OUT/work" --data "$OUT/data" \
     --json "$OUT/frechet_diagnostic.json" --seed $SEED | tee "$OUT/frechet_diagnostic.md"
+"$PY" experiments/zeggs_synthetic/damping_diagnostic.py --workdir "$OUT/work" --data "$OUT/data" \
+    --json "$OUT/damping_diagnostic.json" --seed $SEED --parts loss,decay,predictability | tee "$OUT/damping_diagnostic.md"
 
 # 4. blend sweep between two styles (style examples of another content than the speech: zero-shot)
 s=$(t)

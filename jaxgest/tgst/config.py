@@ -94,6 +94,10 @@ class AutoencoderConfig:
     # ``AutoencoderTrainConfig.pca_init``) with the conv stacks' last layers zeroed, so training starts at
     # the PCA reconstruction and the convs learn the non-linear remainder
     linear_path: bool = False
+    # latent frames on each side the linear path also uses (not in the paper): 0 = non-overlapping blocks
+    # (``fit-pca``); c > 0 = lapped: the linear encoder reads c blocks on each side too and each decoder maps
+    # latent frames t - c .. t + c to block t, initialised by least squares (autoencoder.init_linear_path)
+    linear_context: int = 0
 
     @property
     def latent_dim(self) -> int:
@@ -200,6 +204,9 @@ class AutoencoderTrainConfig:
     # with ``AutoencoderConfig.linear_path``: start from the block PCA of the training clips (True) or from
     # the random initialisation (False, an ablation)
     pca_init: bool = True
+    # weight of the frame-to-frame difference term (autoencoder.expmap_velocity_loss) added to the loss, and
+    # of the squared differences in the least-squares start of a lapped linear path; 0 = the paper's loss only
+    velocity_weight: float = 0.0
 
     def __post_init__(self):
         for name, value, allowed in (("lr_schedule", self.lr_schedule, AE_LR_SCHEDULES),

@@ -228,7 +228,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
         params0 = dict(params0, autoencoder=autoencoder.init_linear_path(
             params0["autoencoder"], cfg.model.autoencoder, (body_data.upper + body_data.mirrored_upper)[
                 :copies * len(body_data.upper)], (body_data.lower + body_data.mirrored_lower)[
-                :copies * len(body_data.lower)]))
+                :copies * len(body_data.lower)], velocity_weight=cfg.train.autoencoder.velocity_weight))
     summary = {"workdir": str(workdir), "preset": preset, "devices": info["devices"],
                "windows": {"ae": cfg.train.autoencoder.window, "transformer": cfg.train.transformer.window}}
 

@@ -137,3 +137,16 @@ def test_fit_pca_preset_is_fit_with_the_linear_path_and_paper_stays_the_papers()
     assert api.count_params("fit-pca")["autoencoder"] - api.count_params("fit")["autoencoder"] == \
         (4 * 39 * 16 + 16) + (16 * 4 * 39 + 4 * 39) + (16 * 4 * 24 + 4 * 24)
     assert Config.from_dict(json.loads(json.dumps(fp.to_dict()))) == fp
+
+
+def test_fit_smooth_preset_is_fit_with_the_lapped_linear_path_and_leaves_the_others_unchanged():
+    fit, fp, fs = preset("fit"), preset("fit-pca"), preset("fit-smooth")
+    assert fs.model.autoencoder == dataclasses.replace(fit.model.autoencoder, linear_path=True, linear_context=1)
+    assert fs.model == dataclasses.replace(fit.model, autoencoder=fs.model.autoencoder)
+    assert fs.train.autoencoder.init_velocity_weight > 0 and fs.train.autoencoder.pca_init
+    assert fp.model.autoencoder.linear_context == 0 and fp.train.autoencoder.velocity_weight == 0
+    assert fit.train.autoencoder.velocity_weight == 0 and fit.train.autoencoder.init_velocity_weight == 0
+    # lapped: encoder kernel 3 blocks of 4 frames, decoders over 3 latent frames
+    assert api.count_params("fit-smooth")["autoencoder"] - api.count_params("fit")["autoencoder"] == \
+        (12 * 39 * 16 + 16) + (3 * 16 * 4 * 39 + 4 * 39) + (3 * 16 * 4 * 24 + 4 * 24)
+    assert Config.from_dict(json.loads(json.dumps(fs.to_dict()))) == fs

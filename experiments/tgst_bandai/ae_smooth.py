@@ -7,9 +7,9 @@ Data: out/ae_cache.npz (``ae_cause.py cache``: training clips original + T-pose 
 30 held-out clips); the held-out BVH files (out/data_eval) give the skeletons of the round-trip motions. A run
 starts from preset ``fit-pca`` (``preset=NAME`` for another), applies ``key=value`` config overrides (dotted
 paths of ``jaxgest.tgst.train.apply_overrides``, e.g. ``autoencoder.linear_context=1``,
-``train.autoencoder.velocity_weight=1.0``), shortens the cosine schedule to STEPS, initialises the linear path
-(:func:`jaxgest.tgst.autoencoder.init_linear_path` on the original + mirrored training clips, with the run's
-velocity weight) and trains STEPS Adam steps with the training step of ``jaxgest tgst train``
+``train.autoencoder.init_velocity_weight=64.0``), shortens the cosine schedule to STEPS, initialises the linear path
+(:func:`jaxgest.tgst.autoencoder.init_linear_path` on the original + mirrored training clips, with
+``init_velocity_weight``) and trains STEPS Adam steps with the training step of ``jaxgest tgst train``
 (:func:`jaxgest.tgst.steps.make_ae_train_step`: the paper's loss plus the optional velocity term); STEPS=0
 scores the closed-form start. ``seed=S`` (default 0).
 
@@ -85,7 +85,7 @@ def run(name, steps, args):
     if mcfg.autoencoder.linear_path and cfg.train.autoencoder.pca_init:
         params = ae_mod.init_linear_path(params, mcfg.autoencoder, data.upper + data.mirrored_upper,
                                          data.lower + data.mirrored_lower,
-                                         velocity_weight=cfg.train.autoencoder.velocity_weight)
+                                         velocity_weight=cfg.train.autoencoder.init_velocity_weight)
     init_s = time.perf_counter() - t0
     curve = []
     if steps:

@@ -65,7 +65,7 @@ SWAP_SIMILARITIES = ("dot", "scaled")
 AE_LR_SCHEDULES = ("constant", "cosine")
 AE_SAMPLINGS = ("windows", "content")
 TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
-PRESETS = ("tiny", "paper", "fit", "fit-pca")  # names accepted by preset()
+PRESETS = ("tiny", "paper", "fit", "fit-pca", "fit-smooth")  # names accepted by preset()
 METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
 
 
@@ -204,9 +204,12 @@ class AutoencoderTrainConfig:
     # with ``AutoencoderConfig.linear_path``: start from the block PCA of the training clips (True) or from
     # the random initialisation (False, an ablation)
     pca_init: bool = True
-    # weight of the frame-to-frame difference term (autoencoder.expmap_velocity_loss) added to the loss, and
-    # of the squared differences in the least-squares start of a lapped linear path; 0 = the paper's loss only
+    # weight of the frame-to-frame difference term (autoencoder.expmap_velocity_loss) added to the training
+    # loss (not in the paper); 0 = the paper's loss only
     velocity_weight: float = 0.0
+    # weight of the squared frame-to-frame differences in the least-squares start of a lapped linear path
+    # (``AutoencoderConfig.linear_context`` > 0; autoencoder.lapped_decoder_fit): larger = smoother start
+    init_velocity_weight: float = 0.0
 
     def __post_init__(self):
         for name, value, allowed in (("lr_schedule", self.lr_schedule, AE_LR_SCHEDULES),
@@ -374,6 +377,13 @@ def preset(name: str = "paper") -> Config:
         fit = preset("fit")
         ae = dataclasses.replace(fit.model.autoencoder, linear_path=True)
         return dataclasses.replace(fit, name="fit-pca", model=dataclasses.replace(fit.model, autoencoder=ae))
-    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit', 'fit-pca' or 'tiny')")
+    if name == "fit-smooth":
+        fit = preset("fit")
+        ae = dataclasses.replace(fit.model.autoencoder, linear_path=True, linear_context=1)
+        ae_train = dataclasses.replace(fit.train.autoencoder, learning_rate=3e-4, init_velocity_weight=64.0,
+                                       velocity_weight=10.0)
+        return dataclasses.replace(fit, name="fit-smooth", model=dataclasses.replace(fit.model, autoencoder=ae),
+                                   train=dataclasses.replace(fit.train, autoencoder=ae_train))
+    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit', 'fit-pca', 'fit-smooth' or 'tiny')")
 
 

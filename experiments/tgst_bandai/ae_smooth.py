@@ -11,7 +11,9 @@ paths of ``jaxgest.tgst.train.apply_overrides``, e.g. ``autoencoder.linear_conte
 (:func:`jaxgest.tgst.autoencoder.init_linear_path` on the original + mirrored training clips, with
 ``init_velocity_weight``) and trains STEPS Adam steps with the training step of ``jaxgest tgst train``
 (:func:`jaxgest.tgst.steps.make_ae_train_step`: the paper's loss plus the optional velocity term); STEPS=0
-scores the closed-form start. ``seed=S`` (default 0).
+scores the closed-form start. ``seed=S`` (default 0). Decompositions of the round trip (the angles are the
+model's): ``truth=upper`` / ``truth=lower`` writes the input's upper / lower body instead of the decoded one;
+``contact=content`` writes the root as the content's own (no per-frame floor contact from the decoded feet).
 
 Scores on the held-out clips: mean geodesic angle (upper body, per clip and joint) beside PCA-16 fitted on the
 original training clips and on original + mirrored ones (paired per clip: mean +- SE); first frame vs
@@ -74,6 +76,8 @@ def run(name, steps, args):
 
     seed = int(args.pop("seed", 0))
     base = args.pop("preset", "fit-pca")
+    truth = args.pop("truth", None)  # "upper" | "lower": that part of the round trip replaced by the input
+    contact = args.pop("contact", "frame")  # "content": the content's own root height (no per-frame contact)
     data, held, _ = load_cache()
     cfg = apply_overrides(preset(base), {"ae_lr_decay_steps": max(steps, 2), **args})
     cfg = tdata.fit_windows(cfg, data)
@@ -117,10 +121,21 @@ def run(name, steps, args):
     ae_pc = np.mean(ae, axis=1)
     long = [i for i, (u, _) in enumerate(held) if len(u) > 40]
     clips = datasets.load_folder(HERE / "out" / "data_eval", progress=False)
+    if truth == "upper":
+        outs = [(u, l_hat) for (_, l_hat), (u, _) in zip(outs, held)]
+    elif truth == "lower":
+        outs = [(u_hat, l) for (u_hat, _), (_, l) in zip(outs, held)]
+    elif truth is not None:
+        sys.exit(f"ae_smooth.py: truth=upper|lower, got {truth!r}")
+    if contact == "content":  # root written as the content's (TGSTModel.to_motion without the floor contact)
+        from jaxgest.tgst import api
+
+        api.content_floor_contact = lambda result, content: result
     rt = roundtrip(mcfg, clips, outs)
     from jaxgest.motion import body
 
-    res = {"name": name, "steps": steps, "args": {**args, "seed": seed, "preset": base}, "init_s": init_s,
+    extra = {k: v for k, v in (("truth", truth), ("contact", contact)) if v not in (None, "frame")}
+    res = {"name": name, "steps": steps, "args": {**args, "seed": seed, "preset": base, **extra}, "init_s": init_s,
            "train_s": train_s, "curve": curve,
            "angle_deg": float(ae_pc.mean()), "per_joint": dict(zip(body.UPPER, np.mean(ae, 0).round(2).tolist())),
            "per_clip": ae_pc.round(4).tolist(), "pca16_deg": float(np.mean(base_pc["pca16"])),

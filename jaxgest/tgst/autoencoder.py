@@ -135,9 +135,10 @@ class MotionAutoencoder(nn.Module):
             mean, std = self._stats("upper")
             upper = (upper - mean) / std
         z = self.encoder(upper)
-        if self.config.linear_path:  # blocks of r frames (the end replicated to a whole block), c blocks of
+        if self.config.linear_path:  # blocks of r frames (the end replicated to a whole block) and, lapped, c
             r, cr = self.config.time_reduction, self.config.linear_context * self.config.time_reduction
-            x = jnp.pad(upper, ((0, 0), (cr, cr + (-upper.shape[1] % r)), (0, 0)), mode="edge")  # context each side
+            # replicated blocks of context on each side: one latent frame per block either way
+            x = jnp.pad(upper, ((0, 0), (cr, cr + (-upper.shape[1] % r)), (0, 0)), mode="edge")
             z = z + self.linear_encoder(x)
         return z
 

@@ -58,7 +58,7 @@ def test_ae_loss_decreases(params):
     state, first = step(state, batch, key)
     for _ in range(29):
         state, metrics = step(state, batch, key)
-    assert set(metrics) == {"loss", "upper_loss", "lower_loss", "angle_deg"}
+    assert set(metrics) == {"loss", "upper_loss", "lower_loss", "velocity_loss", "angle_deg"}
     assert float(metrics["loss"]) < 0.8 * float(first["loss"])
     assert float(metrics["angle_deg"]) < float(first["angle_deg"])
     assert int(state.step) == 30

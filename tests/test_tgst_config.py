@@ -126,6 +126,23 @@ def test_checkpoints_check_only_the_model_config(tmp_path):
     with pytest.raises(CheckpointError, match="standardize"):
         check(tmp_path / "old", dataclasses.replace(
             TINY.model, autoencoder=dataclasses.replace(TINY.model.autoencoder, standardize=True)))
+    # an autoencoder checkpoint written before latent_activation / linear_path / linear_context existed is read
+    # with their older behaviour (GELU latent, no linear path), so it loads for those models and no other
+    before = TINY.model.autoencoder_dict()
+    for field in ("latent_activation", "linear_path", "linear_context"):
+        before["autoencoder"].pop(field)
+    save(tmp_path / "before", json.loads(json.dumps(before)))
+    check(tmp_path / "before", TINY.model)
+    with pytest.raises(CheckpointError, match="linear_path"):
+        check(tmp_path / "before", dataclasses.replace(
+            TINY.model, autoencoder=dataclasses.replace(TINY.model.autoencoder, linear_path=True)))
+    fit_pca = preset("fit-pca").model  # a fit-pca checkpoint of the version before linear_context
+    no_context = fit_pca.autoencoder_dict()
+    no_context["autoencoder"].pop("linear_context")
+    save(tmp_path / "fit-pca", json.loads(json.dumps(no_context)))
+    check(tmp_path / "fit-pca", fit_pca)
+    with pytest.raises(CheckpointError, match="linear_context"):
+        check(tmp_path / "fit-pca", preset("fit-smooth").model)
 
 
 def test_fit_pca_preset_is_fit_with_the_linear_path_and_paper_stays_the_papers():
@@ -137,3 +154,16 @@ def test_fit_pca_preset_is_fit_with_the_linear_path_and_paper_stays_the_papers()
     assert api.count_params("fit-pca")["autoencoder"] - api.count_params("fit")["autoencoder"] == \
         (4 * 39 * 16 + 16) + (16 * 4 * 39 + 4 * 39) + (16 * 4 * 24 + 4 * 24)
     assert Config.from_dict(json.loads(json.dumps(fp.to_dict()))) == fp
+
+
+def test_fit_smooth_preset_is_fit_with_the_lapped_linear_path_and_leaves_the_others_unchanged():
+    fit, fp, fs = preset("fit"), preset("fit-pca"), preset("fit-smooth")
+    assert fs.model.autoencoder == dataclasses.replace(fit.model.autoencoder, linear_path=True, linear_context=1)
+    assert fs.model == dataclasses.replace(fit.model, autoencoder=fs.model.autoencoder)
+    assert fs.train.autoencoder.init_velocity_weight > 0 and fs.train.autoencoder.pca_init
+    assert fp.model.autoencoder.linear_context == 0 and fp.train.autoencoder.velocity_weight == 0
+    assert fit.train.autoencoder.velocity_weight == 0 and fit.train.autoencoder.init_velocity_weight == 0
+    # lapped: encoder kernel 3 blocks of 4 frames, decoders over 3 latent frames
+    assert api.count_params("fit-smooth")["autoencoder"] - api.count_params("fit")["autoencoder"] == \
+        (12 * 39 * 16 + 16) + (3 * 16 * 4 * 39 + 4 * 39) + (3 * 16 * 4 * 24 + 4 * 24)
+    assert Config.from_dict(json.loads(json.dumps(fs.to_dict()))) == fs

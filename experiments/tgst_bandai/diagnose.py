@@ -163,13 +163,34 @@ def main(argv) -> int:
         return 0
 
     # ---- 2. round trips as motions at the clip rate (written like `jaxgest tgst transfer` writes a result)
+    report["roundtrip"] = roundtrip(cfg, clips, ae_out)
+
+    # ---- 3. swap diagnostics on inter pairs
+    if not args.no_swap:
+        sw = jax.jit(lambda p, c, s: tmodel.swap_weights(p, c[None], s[None], cfg=cfg)[0])
+        idx = {c.path: i for i, c in enumerate(clips)}
+        out = []
+        for pair in make_pairs(clips, "inter"):
+            c_up, s_up = held[idx[pair.content.path]][0], held[idx[pair.style.path]][0]
+            out.append(swap_stats(np.asarray(sw(params, c_up, s_up))))
+        report["swap_inter"] = {"num_pairs": len(out), **{k: float(np.mean([o[k] for o in out])) for k in out[0]}}
+    with open(args.out, "w") as f:
+        json.dump(report, f, indent=1)
+    print(json.dumps({k: v for k, v in report.items() if k != "roundtrip"}, indent=1))
+    print(json.dumps({k: v for k, v in report["roundtrip"].items() if k != "clips"}, indent=1))
+    return 0
+
+
+def roundtrip(cfg, clips, outs) -> dict:
+    """Section 2 for any reconstruction: ``outs`` = ``(upper, lower)`` exp-maps at the model rate per clip of
+    ``clips``, written as motions on each clip's skeleton (``TGSTModel.to_motion``) and compared with it."""
     from jaxgest.motion import kinematics
     from jaxgest.tgst.api import TGSTModel
     from jaxgest.tgst.evaluate import _joint_indices, get_protocol
 
-    writer = TGSTModel(cfg, params)
+    writer = TGSTModel(cfg, None)
     rows = []
-    for clip, (u_hat, l_hat) in zip(clips, ae_out):
+    for clip, (u_hat, l_hat) in zip(clips, outs):
         x = clip.motion
         y = writer.to_motion(u_hat, l_hat, x)
         arms = _joint_indices(x, body.ARMS)
@@ -190,7 +211,7 @@ def main(argv) -> int:
                 r[f"skipped_{proto}"] = str(err)
         rows.append(r)
     jr = np.array([r["joint_interior_ratio"] for r in rows])
-    report["roundtrip"] = {
+    return {
         "speed_ratio": float(np.mean([r["speed_ratio"] for r in rows])),
         "speed_ratio_0_5": float(np.mean([r["speed_ratio_0_5"] for r in rows])),
         "first_step_speed": float(np.mean([r["first_step_speed"] for r in rows])),
@@ -200,21 +221,6 @@ def main(argv) -> int:
            for k in ("style", "content") for p in ("world", "authors")},
         **{f"clips_{p}": sum(f"style_{p}" in r for r in rows) for p in ("world", "authors")},
         "clips": rows}
-
-    # ---- 3. swap diagnostics on inter pairs
-    if not args.no_swap:
-        sw = jax.jit(lambda p, c, s: tmodel.swap_weights(p, c[None], s[None], cfg=cfg)[0])
-        idx = {c.path: i for i, c in enumerate(clips)}
-        out = []
-        for pair in make_pairs(clips, "inter"):
-            c_up, s_up = held[idx[pair.content.path]][0], held[idx[pair.style.path]][0]
-            out.append(swap_stats(np.asarray(sw(params, c_up, s_up))))
-        report["swap_inter"] = {"num_pairs": len(out), **{k: float(np.mean([o[k] for o in out])) for k in out[0]}}
-    with open(args.out, "w") as f:
-        json.dump(report, f, indent=1)
-    print(json.dumps({k: v for k, v in report.items() if k != "roundtrip"}, indent=1))
-    print(json.dumps({k: v for k, v in report["roundtrip"].items() if k != "clips"}, indent=1))
-    return 0
 
 
 def swap_stats(w: np.ndarray) -> dict:

@@ -76,7 +76,10 @@ class MotionAutoencoder(nn.Module):
     ``config.linear_path`` adds a block-linear encoder (``linear_encoder``: a conv of kernel = stride =
     ``time_reduction``) to the latent and a linear map of each latent frame to its block of frames
     (``linear_upper``, ``linear_lower``) to each decoder's output (standardised units); :func:`init_linear_path`
-    sets them to the training data's block PCA.
+    sets them to the training data's block PCA. ``config.linear_context`` = c > 0 makes the path lapped: the
+    encoder reads c blocks on each side as well (kernel ``(2c + 1) r``, stride r) and each decoder maps latent
+    frames t - c .. t + c to block t (a transposed conv of kernel ``(2c + 1) r``, stride r), so consecutive
+    blocks share latents and the output need not jump at block boundaries.
     ``config.standardize`` adds the per-channel mean and std of the training data as four frozen parameter
     arrays (``upper_mean``/``upper_std`` (39), ``lower_mean``/``lower_std`` (24); gradients stopped, so Adam
     leaves them unchanged): inputs are standardised and outputs de-standardised (not in the paper).
@@ -104,10 +107,14 @@ class MotionAutoencoder(nn.Module):
         self.upper_decoder = decoder(c.upper_decoder_channels, c.upper_channels)
         self.lower_decoder = decoder(c.lower_decoder_channels, c.lower_channels)
         if c.linear_path:  # block-linear path (not in the paper; see AutoencoderConfig.linear_path)
-            r = c.time_reduction
-            self.linear_encoder = nn.Conv(c.latent_dim, kernel_size=(r,), strides=(r,), padding="VALID")
-            self.linear_upper = nn.Dense(r * c.upper_channels)
-            self.linear_lower = nn.Dense(r * c.lower_channels)
+            r, n = c.time_reduction, 2 * c.linear_context + 1
+            self.linear_encoder = nn.Conv(c.latent_dim, kernel_size=(n * r,), strides=(r,), padding="VALID")
+            if c.linear_context:  # lapped: each output block from latent frames t - c .. t + c
+                self.linear_upper = nn.Conv(r * c.upper_channels, kernel_size=(n,), padding="VALID")
+                self.linear_lower = nn.Conv(r * c.lower_channels, kernel_size=(n,), padding="VALID")
+            else:  # the block path of ``fit-pca`` checkpoints (Dense parameters)
+                self.linear_upper = nn.Dense(r * c.upper_channels)
+                self.linear_lower = nn.Dense(r * c.lower_channels)
 
         if c.standardize:  # frozen data statistics (set by training, never updated: stop_gradient below)
             zeros, ones = nn.initializers.zeros, nn.initializers.ones
@@ -128,18 +135,21 @@ class MotionAutoencoder(nn.Module):
             mean, std = self._stats("upper")
             upper = (upper - mean) / std
         z = self.encoder(upper)
-        if self.config.linear_path:  # blocks of r frames (the end replicated to a whole block)
-            r = self.config.time_reduction
-            x = jnp.pad(upper, ((0, 0), (0, -upper.shape[1] % r), (0, 0)), mode="edge")
+        if self.config.linear_path:  # blocks of r frames (the end replicated to a whole block) and, lapped, c
+            r, cr = self.config.time_reduction, self.config.linear_context * self.config.time_reduction
+            # replicated blocks of context on each side: one latent frame per block either way
+            x = jnp.pad(upper, ((0, 0), (cr, cr + (-upper.shape[1] % r)), (0, 0)), mode="edge")
             z = z + self.linear_encoder(x)
         return z
 
     def _decode(self, decoder, part: str, z: jax.Array) -> jax.Array:
         chex.assert_rank(z, 3)
         y = decoder(z)
-        if self.config.linear_path:  # each latent frame -> its block of r frames
+        if self.config.linear_path:  # latent frames t - c .. t + c (edge-replicated) -> block t of r frames
             b, t, _ = z.shape
-            y = y + getattr(self, f"linear_{part}")(z).reshape(b, t * self.config.time_reduction, -1)
+            c = self.config.linear_context
+            zc = jnp.pad(z, ((0, 0), (c, c), (0, 0)), mode="edge") if c else z
+            y = y + getattr(self, f"linear_{part}")(zc).reshape(b, t * self.config.time_reduction, -1)
         if self.config.standardize:
             mean, std = self._stats(part)
             y = mean + std * y
@@ -158,11 +168,60 @@ class MotionAutoencoder(nn.Module):
         return (self.decode_upper(z), self.decode_lower(z)), {"latents": z}
 
 
-def init_linear_path(params: dict, config: AutoencoderConfig, uppers, lowers) -> dict:
-    """``params`` with the block-linear path set to the block PCA of the clips and the conv stacks' last layers
-    zeroed: the autoencoder then reconstructs exactly like the PCA (:func:`jaxgest.tgst.baselines.block_pca_fit`
-    of ``uppers`` with ``latent_dim`` components per ``time_reduction`` frames, in raw exp-map units), the lower
-    body by the least-squares linear map from those codes.
+def _context_features(z: np.ndarray, c: int) -> np.ndarray:
+    """Latent frames ``(T, d)`` -> ``(T, (2c + 1) d + 1)``: frames t - c .. t + c (edge-replicated) and a 1."""
+    t = len(z)
+    zp = np.pad(z, ((c, c), (0, 0)), mode="edge")
+    return np.concatenate([zp[k:k + t] for k in range(2 * c + 1)] + [np.ones((t, 1))], axis=1)
+
+
+def lapped_decoder_fit(codes, targets, *, frames: int, context: int, velocity_weight: float = 0.0) -> np.ndarray:
+    """Least-squares linear decoder from latent frames t - c .. t + c (and a bias) to block t of frames.
+
+    codes: per clip ``(T_i, d)``; targets: per clip ``(T_i * frames, C)``. Minimises the squared error of every
+    frame plus ``velocity_weight`` times the squared error of every frame-to-frame difference (inside blocks
+    and across block boundaries, where a block decoder jumps). Returns ``W`` ``(frames, (2c + 1) d + 1, C)``:
+    frame j of block t is ``features_t @ W[j]`` (:func:`_context_features`). Closed form (normal equations).
+    """
+    r = frames
+    p = (2 * context + 1) * codes[0].shape[1] + 1
+    a = np.zeros((r * p, r * p))
+    b = np.zeros((r * p, targets[0].shape[1]))
+
+    def add(rows: np.ndarray, y: np.ndarray, w: float):
+        a[...] += w * rows.T @ rows
+        b[...] += w * rows.T @ y
+
+    for z, x in zip(codes, targets):
+        f = _context_features(np.asarray(z, np.float64), context)
+        t = len(f)
+        x = np.asarray(x, np.float64).reshape(t, r, -1)
+        for j in range(r):  # frame j of every block: features in slot j
+            a[j * p:(j + 1) * p, j * p:(j + 1) * p] += f.T @ f
+            b[j * p:(j + 1) * p] += f.T @ x[:, j]
+        if velocity_weight:
+            for j in range(r - 1):  # x[j + 1] - x[j] inside a block
+                rows = np.zeros((t, r * p))
+                rows[:, (j + 1) * p:(j + 2) * p], rows[:, j * p:(j + 1) * p] = f, -f
+                add(rows, x[:, j + 1] - x[:, j], velocity_weight)
+            rows = np.zeros((t - 1, r * p))  # first frame of block t + 1 minus last frame of block t
+            rows[:, :p], rows[:, (r - 1) * p:] = f[1:], -f[:-1]
+            add(rows, x[1:, 0] - x[:-1, r - 1], velocity_weight)
+    w = np.linalg.solve(a + 1e-8 * np.trace(a) / len(a) * np.eye(len(a)), b)
+    return w.reshape(r, p, -1)
+
+
+def init_linear_path(params: dict, config: AutoencoderConfig, uppers, lowers, *, velocity_weight: float = 0.0) -> dict:
+    """``params`` with the linear path set to a linear autoencoder fitted to the clips and the conv stacks'
+    last layers zeroed, so training starts at that linear reconstruction and the convs learn the remainder.
+
+    Encoder: the block PCA of ``uppers`` (:func:`jaxgest.tgst.baselines.block_pca_fit`, ``latent_dim``
+    components per ``time_reduction`` frames, raw exp-map units; with ``linear_context`` > 0 the context taps
+    start at zero). Decoders: block path (``linear_context`` 0) -- the PCA reconstruction for the upper body
+    (the autoencoder then reconstructs exactly like the PCA) and the least-squares map from the codes for the
+    lower body; lapped path -- the least-squares maps of :func:`lapped_decoder_fit` from latent frames
+    t - c .. t + c for both, with ``velocity_weight`` on the frame-to-frame differences (for the upper body;
+    the lower body is fitted on frames only when it is 0).
 
     uppers / lowers: the training clips ``(F_i, 39)`` / ``(F_i, 24)``; with ``config.standardize`` the stored
     statistics in ``params`` are used to express the maps in standardised units (set them first).
@@ -172,14 +231,12 @@ def init_linear_path(params: dict, config: AutoencoderConfig, uppers, lowers) ->
 
     if not config.linear_path:
         raise ValueError("init_linear_path needs AutoencoderConfig.linear_path=True")
-    r, d = config.time_reduction, config.latent_dim
+    r, d, c = config.time_reduction, config.latent_dim, config.linear_context
     pca = baselines.block_pca_fit(uppers, components=d, frames=r)
     mu, v = pca["mean"], pca["basis"]  # (r*39,), (d, r*39): z = v (x - mu), x_hat = mu + v^T z
-    blocks = np.concatenate([baselines._blocks(np.asarray(u, np.float64), r) for u in uppers])
-    lo_blocks = np.concatenate([baselines._blocks(np.asarray(l, np.float64), r) for l in lowers])
-    z = (blocks - mu) @ v.T
-    a = np.concatenate([z, np.ones((len(z), 1))], axis=1)
-    w_lo = np.linalg.lstsq(a, lo_blocks, rcond=None)[0]  # (d + 1, r*24)
+    ups = [np.asarray(u, np.float64)[:len(u) // r * r] for u in uppers]
+    los = [np.asarray(l, np.float64)[:len(l) // r * r] for l in lowers]
+    codes = [(u.reshape(-1, r * u.shape[1]) - mu) @ v.T for u in ups]
 
     def stats(part, ch):
         if config.standardize:
@@ -189,15 +246,35 @@ def init_linear_path(params: dict, config: AutoencoderConfig, uppers, lowers) ->
 
     m_up, s_up = stats("upper", config.upper_channels)
     m_lo, s_lo = stats("lower", config.lower_channels)
-    # encoder on standardised x_s = (x - m) / s: z = (v * s) x_s + v (m - mu); conv kernel (r, 39, d)
-    k_enc = (v * s_up).reshape(d, r, config.upper_channels).transpose(1, 2, 0)
+    # encoder on standardised x_s = (x - m) / s: z = (v * s) x_s + v (m - mu); conv kernel ((2c+1) r, 39, d),
+    # the block itself in the middle taps
+    k_enc = np.zeros(((2 * c + 1) * r, config.upper_channels, d))
+    k_enc[c * r:(c + 1) * r] = (v * s_up).reshape(d, r, config.upper_channels).transpose(1, 2, 0)
     b_enc = v @ (m_up - mu)
-    # decoders predict standardised y with x = m + s y: y = (mu + v^T z - m) / s
     f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
     out = dict(params)
     out["linear_encoder"] = {"kernel": f32(k_enc), "bias": f32(b_enc)}
-    out["linear_upper"] = {"kernel": f32(v / s_up), "bias": f32((mu - m_up) / s_up)}
-    out["linear_lower"] = {"kernel": f32(w_lo[:-1] / s_lo), "bias": f32((w_lo[-1] - m_lo) / s_lo)}
+
+    def decoder(w, m, s):  # w: (features + 1, r*C) raw units -> standardised y = (x - m) / s
+        kernel, bias = w[:-1] / s, (w[-1] - m) / s
+        if c:  # conv kernel (2c+1, d, r*C) over latent frames t-c .. t+c
+            kernel = kernel.reshape(2 * c + 1, d, -1)
+        return {"kernel": f32(kernel), "bias": f32(bias)}
+
+    def lapped(targets, ch, vw):  # (r, p, C) -> (p, r*C) with block frames outermost
+        w = lapped_decoder_fit(codes, targets, frames=r, context=c, velocity_weight=vw)
+        return w.transpose(1, 0, 2).reshape(w.shape[1], r * ch)
+
+    if c:
+        w_up = lapped(ups, config.upper_channels, velocity_weight)
+        w_lo = lapped(los, config.lower_channels, velocity_weight)
+    else:
+        w_up = np.concatenate([v, mu[None]], axis=0)
+        z = np.concatenate(codes)
+        lo_blocks = np.concatenate([l.reshape(-1, r * l.shape[1]) for l in los])
+        w_lo = np.linalg.lstsq(np.concatenate([z, np.ones((len(z), 1))], axis=1), lo_blocks, rcond=None)[0]
+    out["linear_upper"] = decoder(w_up, m_up, s_up)
+    out["linear_lower"] = decoder(w_lo, m_lo, s_lo)
     for stack in ("encoder", "upper_decoder", "lower_decoder"):
         last = max((k for k in params[stack]), key=lambda k: int(k.split("_")[1]))
         out[stack] = dict(params[stack], **{last: jax.tree_util.tree_map(jnp.zeros_like, params[stack][last])})
@@ -216,6 +293,16 @@ def expmap_reconstruction_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
     b, f, c = pred.shape
     d = (pred - target).reshape(b, f, c // 3, 3)
     return jnp.mean(safe_norm(d), axis=(1, 2))
+
+
+def expmap_velocity_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
+    """Mean over frame pairs and joints of ``||(r_hat[t+1] - r_hat[t]) - (r[t+1] - r[t])||_2``: the
+    reconstruction error of the frame-to-frame change (jitter and frozen motion both cost). ``(batch,)``.
+
+    Not in the paper: an optional recipe term (``AutoencoderTrainConfig.velocity_weight``).
+    """
+    chex.assert_equal_shape([pred, target])
+    return expmap_reconstruction_loss(jnp.diff(pred, axis=1), jnp.diff(target, axis=1))
 
 
 def angular_error_rad(pred: jax.Array, target: jax.Array) -> jax.Array:

@@ -39,6 +39,13 @@ Presets (``preset(name)``):
   at the PCA-16 reconstruction and the convs learn the non-linear remainder. On Bandai-Namco the paper's
   conv autoencoder alone stays far above PCA-16 (experiments/tgst_bandai, section 2).
   Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-pca``.
+* ``"fit-smooth"`` -- ``fit`` plus a lapped linear path (``linear_context=1``, not in the paper: each decoder
+  maps latent frames t-1 .. t+1 to output block t, the linear encoder reads one block on each side; +19,852
+  parameters), started at a linear autoencoder in closed form (block PCA encoder, least-squares decoders
+  with the frame-to-frame differences weighted by ``init_velocity_weight=64``), trained at Adam 3e-4 with
+  a velocity term in the loss (``velocity_weight=10``). Removes ``fit-pca``'s jumps at the 4-frame block
+  boundaries: held-out angle below PCA-16 and half the round-trip speed excess (experiments/tgst_bandai,
+  section 2c). Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-smooth --ae-steps 500``.
 * ``"tiny"`` -- the paper's model (the same :class:`ModelConfig`: the widths are already tiny) with short
   windows and small batches (AE window 64, batch 4; transformer window 128, batch 4) and Adam 1e-3 so tests
   and ``jaxgest demo --quick`` train in seconds to a minute on a CPU. Not the paper's training setup.
@@ -65,7 +72,7 @@ SWAP_SIMILARITIES = ("dot", "scaled")
 AE_LR_SCHEDULES = ("constant", "cosine")
 AE_SAMPLINGS = ("windows", "content")
 TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
-PRESETS = ("tiny", "paper", "fit", "fit-pca")  # names accepted by preset()
+PRESETS = ("tiny", "paper", "fit", "fit-pca", "fit-smooth")  # names accepted by preset()
 METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
 
 
@@ -94,6 +101,10 @@ class AutoencoderConfig:
     # ``AutoencoderTrainConfig.pca_init``) with the conv stacks' last layers zeroed, so training starts at
     # the PCA reconstruction and the convs learn the non-linear remainder
     linear_path: bool = False
+    # latent frames on each side the linear path also uses (not in the paper): 0 = non-overlapping blocks
+    # (``fit-pca``); c > 0 = lapped: the linear encoder reads c blocks on each side too and each decoder maps
+    # latent frames t - c .. t + c to block t, initialised by least squares (autoencoder.init_linear_path)
+    linear_context: int = 0
 
     @property
     def latent_dim(self) -> int:
@@ -200,6 +211,12 @@ class AutoencoderTrainConfig:
     # with ``AutoencoderConfig.linear_path``: start from the block PCA of the training clips (True) or from
     # the random initialisation (False, an ablation)
     pca_init: bool = True
+    # weight of the frame-to-frame difference term (autoencoder.expmap_velocity_loss) added to the training
+    # loss (not in the paper); 0 = the paper's loss only
+    velocity_weight: float = 0.0
+    # weight of the squared frame-to-frame differences in the least-squares start of a lapped linear path
+    # (``AutoencoderConfig.linear_context`` > 0; autoencoder.lapped_decoder_fit): larger = smoother start
+    init_velocity_weight: float = 0.0
 
     def __post_init__(self):
         for name, value, allowed in (("lr_schedule", self.lr_schedule, AE_LR_SCHEDULES),
@@ -343,8 +360,8 @@ def legacy_to_dict(flat: Mapping[str, Any]) -> dict:
 
 def preset(name: str = "paper") -> Config:
     """Named preset: ``"paper"`` (published sizes and training setup), ``"fit"`` (the paper's sizes with an
-    autoencoder recipe for real data), ``"fit-pca"`` (``fit`` with the PCA-initialised linear path) or
-    ``"tiny"`` (fast tests/demo)."""
+    autoencoder recipe for real data), ``"fit-pca"`` (``fit`` with the PCA-initialised linear path),
+    ``"fit-smooth"`` (``fit`` with the lapped linear path and the velocity term) or ``"tiny"`` (fast tests/demo)."""
     if name == "paper":
         return Config(name="paper", model=ModelConfig(edge_frames=16))
     if name == "tiny":
@@ -367,6 +384,13 @@ def preset(name: str = "paper") -> Config:
         fit = preset("fit")
         ae = dataclasses.replace(fit.model.autoencoder, linear_path=True)
         return dataclasses.replace(fit, name="fit-pca", model=dataclasses.replace(fit.model, autoencoder=ae))
-    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit', 'fit-pca' or 'tiny')")
+    if name == "fit-smooth":
+        fit = preset("fit")
+        ae = dataclasses.replace(fit.model.autoencoder, linear_path=True, linear_context=1)
+        ae_train = dataclasses.replace(fit.train.autoencoder, learning_rate=3e-4, init_velocity_weight=64.0,
+                                       velocity_weight=10.0)
+        return dataclasses.replace(fit, name="fit-smooth", model=dataclasses.replace(fit.model, autoencoder=ae),
+                                   train=dataclasses.replace(fit.train, autoencoder=ae_train))
+    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit', 'fit-pca', 'fit-smooth' or 'tiny')")
 
 

@@ -47,7 +47,8 @@ def create_transformer_state(cfg: Config, tr_params: Params,
 
 
 def make_ae_train_step(cfg: Config, tx: optax.GradientTransformation) -> Step:
-    """Adam step on the mean exp-map reconstruction loss (§3.5); batch ``{"upper", "lower"}``."""
+    """Adam step on the mean exp-map reconstruction loss (§3.5), plus ``train.autoencoder.velocity_weight`` times
+    the frame-to-frame difference term when it is set (not in the paper); batch ``{"upper", "lower"}``."""
 
     del tx  # the state's own optimiser applies the update
 
@@ -55,7 +56,8 @@ def make_ae_train_step(cfg: Config, tx: optax.GradientTransformation) -> Step:
         del key, step  # deterministic model (no dropout), constant loss weights
         terms = ae_loss_terms(params, batch, cfg=cfg.model)
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
-        return metrics["loss"], metrics
+        w = cfg.train.autoencoder.velocity_weight  # optional recipe term (not in the paper)
+        return (metrics["loss"] + w * metrics["velocity_loss"] if w else metrics["loss"]), metrics
 
     return make_update_step(loss_fn)
 

@@ -42,7 +42,7 @@ from jaxgest.tgst.workdir import (AE_KIND, AE_SUBDIR, MODEL, TRANSFORMER_KIND,  
                                   transformer_checkpointer)
 
 DEFAULT_STEPS = {"tiny": (200, 200), "paper": (10_000, 10_000), "fit": (6_000, 10_000),
-                 "fit-pca": (6_000, 10_000)}
+                 "fit-pca": (6_000, 10_000), "fit-smooth": (1_000, 10_000)}
 PRESETS = tuple(DEFAULT_STEPS)
 
 
@@ -228,7 +228,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
         params0 = dict(params0, autoencoder=autoencoder.init_linear_path(
             params0["autoencoder"], cfg.model.autoencoder, (body_data.upper + body_data.mirrored_upper)[
                 :copies * len(body_data.upper)], (body_data.lower + body_data.mirrored_lower)[
-                :copies * len(body_data.lower)]))
+                :copies * len(body_data.lower)], velocity_weight=cfg.train.autoencoder.init_velocity_weight))
     summary = {"workdir": str(workdir), "preset": preset, "devices": info["devices"],
                "windows": {"ae": cfg.train.autoencoder.window, "transformer": cfg.train.transformer.window}}
 

@@ -47,13 +47,25 @@ def _stored_model(stored: Mapping) -> ModelConfig:
     return model_config_from_dict({k: v for k, v in stored.items() if k != "autoencoder_step"})
 
 
+#: autoencoder fields added after checkpoints were written, with the value that is the older behaviour: a
+#: checkpoint without one is read with it (same parameters, same outputs), not rejected as another layout
+ADDED_AUTOENCODER_FIELDS = {"latent_activation": True, "linear_path": False, "linear_context": 0}
+
+
+def _with_added_fields(stored: Mapping) -> dict:
+    d = dict(stored)
+    if isinstance(d.get("autoencoder"), Mapping):
+        d["autoencoder"] = {**ADDED_AUTOENCODER_FIELDS, **d["autoencoder"]}
+    return d
+
+
 def _read_ae_config(stored: Mapping) -> dict:
-    return _stored_model(stored).autoencoder_dict() if "name" in stored else dict(stored)
+    return _stored_model(stored).autoencoder_dict() if "name" in stored else _with_added_fields(stored)
 
 
 def _read_transformer_config(stored: Mapping) -> dict:
     if "name" not in stored:
-        return dict(stored)
+        return _with_added_fields(stored)
     return dict(_stored_model(stored).to_dict(), autoencoder_step=stored.get("autoencoder_step"))
 
 

@@ -5,9 +5,10 @@ target style; intra: the style clip itself).
 
     python experiments/tgst_bandai/collage_bound.py EVAL_DIR OUT_JSON [--trim 0.3]
 
-A transfer whose output frames are (blends of) the style clip's poses cannot get below ``nearest_frame`` by
-picking better tokens; blends can leave the style's poses, so the bound is exact only for hard swaps
-(and approximate, since a decoded collage is not exactly the style's poses).
+Each DTW-aligned pair of a content frame with one of the style's poses costs at least that content frame's
+``nearest_frame`` distance, so an output made of the style's poses gets below the mean only through the uneven
+weighting of the DTW path (content frames aligned more than once), not by picking better poses. Approximate for
+decoded outputs (a decoded collage is not exactly the style's poses) and for blends (which leave them).
 References: Kuriyama et al. 2022, eqs. 13-14 (content error).
 """
 import argparse

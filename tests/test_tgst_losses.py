@@ -108,6 +108,28 @@ def test_hard_swap_is_soft_swap_at_zero_temperature():
 
 # ---------------------------------------------------------------- losses (eqs. 5-12)
 
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_nearest_token_weights_pick_the_nearest_style_token(seed):
+    rng = np.random.default_rng(seed)
+    style = rng.normal(size=(1, 6, 8)).astype(np.float32)
+    pick = rng.integers(0, 6, size=4)
+    content = style[:, pick] + 0.01 * rng.normal(size=(1, 4, 8)).astype(np.float32)
+    hard = np.asarray(swap.nearest_token_weights(jnp.asarray(content), jnp.asarray(style)))
+    np.testing.assert_array_equal(hard[0].argmax(-1), pick)
+    np.testing.assert_allclose(hard.sum(-1), 1.0)
+    np.testing.assert_allclose(np.asarray(swap.apply_swap(hard, style)), style[:, pick], atol=1e-6)
+    soft = np.asarray(swap.nearest_token_weights(jnp.asarray(content), jnp.asarray(style), temperature=1.0))
+    np.testing.assert_allclose(soft.sum(-1), 1.0, rtol=1e-5)
+    assert (soft[0].argmax(-1) == pick).all()
+    flat = np.asarray(swap.nearest_token_weights(jnp.asarray(content), jnp.asarray(style), temperature=1e9))
+    np.testing.assert_allclose(flat, 1 / 6, rtol=1e-3)  # a huge temperature blends every style token evenly
+    valid = np.ones((1, 6), bool)
+    valid[0, pick[0]] = False  # the nearest token of content 0 is padding: never chosen
+    masked = np.asarray(swap.nearest_token_weights(jnp.asarray(content), jnp.asarray(style), style_valid=valid))
+    assert masked[0, 0, pick[0]] == 0.0 and masked[0, 0].sum() == 1.0
+
+
 def test_token_norm_is_mean_per_token_l2():
     x = jnp.asarray([[[3.0, 4.0], [0.0, 0.0]]])
     np.testing.assert_allclose(np.asarray(losses.token_norm(x)), [2.5])

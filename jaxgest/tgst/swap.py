@@ -71,6 +71,31 @@ def hard_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, simi
     return jax.nn.one_hot(jnp.argmax(logits, axis=-1), logits.shape[-1], dtype=logits.dtype)
 
 
+def nearest_token_weights(content_tokens: jax.Array, style_tokens: jax.Array, temperature: float = 0.0,
+                          style_valid=None) -> jax.Array:
+    """Oracle swap weights ``(batch, Nc, Ns)`` from squared Euclidean distances of RAW tokens (no transformer).
+
+    temperature = 0: one-hot on the style token nearest to each content token; > 0: softmax of
+    ``-d^2 / (temperature * s)`` with s the median over content tokens of their nearest squared distance (so
+    the temperature is relative to the clip pair's own scale). A diagnostic upper bound on how much content a
+    collage of style tokens can keep when the choice is made by content similarity in latent space, not a
+    method of the paper. style_valid: optional ``(batch, Ns)`` bool (padded tokens get weight 0).
+    References: Kuriyama et al. 2022, eq. 4 (the swap whose choice this replaces).
+    """
+    chex.assert_rank([content_tokens, style_tokens], 3)
+    chex.assert_axis_dimension(style_tokens, 2, content_tokens.shape[-1])
+    d2 = (jnp.sum(content_tokens ** 2, -1)[:, :, None] + jnp.sum(style_tokens ** 2, -1)[:, None, :]
+          - 2.0 * jnp.einsum("bnd,bmd->bnm", content_tokens, style_tokens))
+    d2 = jnp.maximum(d2, 0.0)
+    if style_valid is not None:
+        chex.assert_shape(style_valid, style_tokens.shape[:2])
+        d2 = jnp.where(style_valid.astype(bool)[:, None, :], d2, jnp.inf)
+    if temperature <= 0:
+        return jax.nn.one_hot(jnp.argmin(d2, axis=-1), d2.shape[-1], dtype=content_tokens.dtype)
+    scale = jnp.median(jnp.min(d2, axis=-1), axis=-1)[:, None, None] + 1e-9
+    return jax.nn.softmax(-d2 / (temperature * scale), axis=-1)
+
+
 def apply_swap(weights: jax.Array, style_tokens: jax.Array) -> jax.Array:
     """Blend raw style tokens: ``(batch, Nc, Ns) x (batch, Ns, d) -> (batch, Nc, d)``."""
     chex.assert_rank([weights, style_tokens], 3)

@@ -69,17 +69,19 @@ parallel.make_mesh = _one_device_by_default
 #: ones fill in at the end (longest-processing-time-first). Without this order xdist sorts the files by
 #: their number of tests, which put the three longest (few tests each) on one worker at the end.
 COSTLIEST_FIRST = (
-    "test_zeggs_style_control.py",  # trains its own 1,200-step model; needs none of the session's models
-    "test_parallel.py",
-    "test_resume_kill.py",
-    "test_cli_bad_input.py",
-    "test_zeggs_model.py",
-    "test_tgst_api.py",
-    "test_zeggs_api.py",
-    "test_bench_harness.py",
-    "test_tgst_transfer.py",
-    "test_determinism.py",
-    "test_faults_checkpoints.py",
+    "test_zeggs_style_control.py",  # 100 s: its own 1,200-step model; needs none of the session's models
+    "test_parallel.py",  # 135 s with the session's tiny models (whoever needs them first builds them)
+    "test_tgst_transfer.py",  # 90
+    "test_bench_harness.py",  # 73
+    "test_zeggs_model.py",  # 68
+    "test_resume_kill.py",  # 67 (subprocesses)
+    "test_tgst_api.py",  # 50
+    "test_cli_bad_input.py",  # 45
+    "test_faults_checkpoints.py",  # 40
+    "test_zeggs_api.py",  # 40
+    "test_zeggs_quant.py",  # 38
+    "test_invariance.py",  # 30
+    "test_determinism.py",  # 27
 )
 
 

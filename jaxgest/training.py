@@ -40,6 +40,8 @@ from jaxgest.io import write_error, write_json_atomic  # noqa: F401  (write_json
 __all__ = [
     "TrainState",
     "make_update_step",
+    "bare_state",
+    "jit_config_step",
     "Checkpointer",
     "MetricsLogger",
     "train_loop",
@@ -73,6 +75,35 @@ def make_update_step(loss_fn: LossFn, *, fold_in_step: bool = False):
         return state.apply_gradients(grads=grads), metrics
 
     return step
+
+
+def bare_state(state: TrainState) -> TrainState:
+    """``state`` without its static fields (optimiser object, apply function): params, opt_state, step.
+
+    A TrainState's ``tx`` and ``apply_fn`` are static fields, i.e. part of jit's cache key, and a fresh
+    ``optax`` optimiser per ``train`` call would never match it; a step given to :func:`jit_config_step`
+    takes and returns the bare state and rebuilds its optimiser from the (static) config inside.
+    """
+    return state.replace(apply_fn=None, tx=None)
+
+
+def jit_config_step(step: Callable, mesh, cfg, *, extra_args: int = 0,
+                    compiler_options: Optional[dict] = None) -> Callable:
+    """``step(state, batch, key, *extra, cfg) -> (state, metrics)`` jit-compiled data-parallel over ``mesh``
+    with ``cfg`` (a frozen, hashable config) a static argument, bound: returns ``(state, batch, key, *extra)
+    -> (state, metrics)`` with the shardings of :func:`jaxgest.parallel.parallelize_step` (state, key and the
+    ``extra_args`` further arguments replicated, batch split, state donated).
+
+    ``step`` must be a module-level function and ``state`` a :func:`bare_state`: the cache key is then
+    (step, config, shapes, shardings, compiler options) and jit's own cache serves every training of one
+    config in a process (resume, tests) without tracing again; nothing is memoised here.
+    """
+    from jaxgest import parallel
+
+    rep, data = parallel.replicated(mesh), parallel.data_sharding(mesh)
+    jitted = jax.jit(step, in_shardings=(rep, data, rep) + (rep,) * extra_args, out_shardings=(rep, rep),
+                     static_argnums=(3 + extra_args,), donate_argnums=(0,), compiler_options=compiler_options)
+    return lambda state, batch, key, *extra: jitted(state, batch, key, *extra, cfg)
 
 
 class MetricsLogger:

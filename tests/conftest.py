@@ -11,13 +11,19 @@ the package's own default (all visible devices).
 Trained models. ``tiny_data`` (4 synthetic clips x 3 s, BVH + WAV) and the tiny TGST / ZeroEGGS workdirs
 trained on it once per session (seed 0; TGST 4 + 4 steps, ZeroEGGS 4 steps; checkpoints every 2 steps, so
 each stage keeps steps 2 and 4; metrics every step) are shared by the CLI, bad-input, faults,
-determinism, pipeline and resume tests. They are READ-ONLY: a test that changes a workdir copies it first
+determinism, pipeline and resume tests, and with pytest-xdist by the workers too (built by the first
+worker that needs them, under a file lock). They are READ-ONLY: a test that changes a workdir copies it first
 (``copy_workdir``). Real-data tests read ../shared/data and skip cleanly when it is absent.
+
+Order. The costliest files run first (``COSTLIEST_FIRST``), so ``-n 2 --dist loadfile`` ends with short
+files on both workers instead of a long one on one of them.
 """
 
 from __future__ import annotations
 
+import fcntl
 import functools
+import json
 import os
 import pathlib
 import shutil
@@ -55,6 +61,40 @@ def _one_device_by_default(num_devices=None):
 parallel.make_mesh = _one_device_by_default
 
 
+# ----- order of the files (pytest-xdist workers) ----------------------------------------------------------
+
+#: The costliest test files, costliest first (CPU seconds of the file on one worker, session models included
+#: where the file is the first to need them; measured with ``--durations`` per file). ``-n 2 --dist loadfile``
+#: hands whole files to the two workers in collection order, so the long files start first and the short
+#: ones fill in at the end (longest-processing-time-first). Without this order xdist sorts the files by
+#: their number of tests, which put the three longest (few tests each) on one worker at the end.
+COSTLIEST_FIRST = (
+    "test_zeggs_style_control.py",  # 100 s: its own 1,200-step model; needs none of the session's models
+    "test_parallel.py",  # 135 s with the session's tiny models (whoever needs them first builds them)
+    "test_tgst_transfer.py",  # 90
+    "test_bench_harness.py",  # 73
+    "test_zeggs_model.py",  # 68
+    "test_resume_kill.py",  # 67 (subprocesses)
+    "test_tgst_api.py",  # 50
+    "test_cli_bad_input.py",  # 45
+    "test_faults_checkpoints.py",  # 40
+    "test_zeggs_api.py",  # 40
+    "test_zeggs_quant.py",  # 38
+    "test_invariance.py",  # 30
+    "test_determinism.py",  # 27
+)
+
+
+def pytest_configure(config):
+    if hasattr(config.option, "loadscopereorder"):  # pytest-xdist: keep the order of COSTLIEST_FIRST
+        config.option.loadscopereorder = False
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(COSTLIEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the others keep their order
+
+
 @pytest.fixture
 def all_devices(monkeypatch):
     """Within the test, ``make_mesh()`` without a count uses every device again (the package's default)."""
@@ -84,22 +124,41 @@ def zeggs_dir():
 
 # ----- the session's tiny trained models -------------------------------------------------------------------
 
+def _built_once(tmp_path_factory, name: str, build) -> tuple:
+    """``(folder, result)``: ``build(folder)`` run once per test session and its JSON-able result. With
+    pytest-xdist the workers share it: the first worker that needs it builds it under a file lock in the
+    session's common temporary folder, the others wait for the lock and read it (a trained model costs one
+    worker, not each). Read-only for everyone."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the session's folder, above each worker's own popen-gwN
+    folder, done = root / "built" / name, root / "built" / f"{name}.json"
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    with open(root / "built" / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not done.is_file():
+            shutil.rmtree(folder, ignore_errors=True)
+            result = build(folder)
+            done.write_text(json.dumps(result))  # after the build: a crashed build is rebuilt by the next
+        return folder, json.loads(done.read_text())
+
+
 @pytest.fixture(scope="session")
 def tiny_data(tmp_path_factory) -> pathlib.Path:
     """The built-in synthetic dataset, 4 clips x 3 s (BVH + WAV); read-only."""
     from jaxgest.motion.synthetic import write_dataset
 
-    folder = tmp_path_factory.mktemp("tiny") / "data"
-    write_dataset(folder, clips=4, seconds=3, progress=False)
-    return folder
+    def build(folder):
+        write_dataset(folder, clips=4, seconds=3, progress=False)
+
+    return _built_once(tmp_path_factory, "tiny_data", build)[0]
 
 
 @pytest.fixture(scope="session")
 def tgst_trained(tiny_data, tmp_path_factory) -> tuple:
     """``(workdir, summary)``: tiny TGST trained on ``tiny_data`` (4 + 4 steps, checkpoints 2 and 4 per stage)
     and what ``train`` returned; read-only."""
-    work = tmp_path_factory.mktemp("tiny_tgst") / "tgst"
-    return work, train_tgst(tiny_data, work)
+    return _built_once(tmp_path_factory, "tgst", lambda work: train_tgst(tiny_data, work))
 
 
 @pytest.fixture(scope="session")
@@ -112,8 +171,7 @@ def tgst_workdir(tgst_trained) -> pathlib.Path:
 def zeggs_trained(tiny_data, tmp_path_factory) -> tuple:
     """``(workdir, summary)``: tiny ZeroEGGS trained on ``tiny_data`` (4 steps, checkpoints 2 and 4) and what
     ``train`` returned; read-only."""
-    work = tmp_path_factory.mktemp("tiny_zeggs") / "zeggs"
-    return work, train_zeggs(tiny_data, work)
+    return _built_once(tmp_path_factory, "zeggs", lambda work: train_zeggs(tiny_data, work))
 
 
 @pytest.fixture(scope="session")
@@ -127,10 +185,11 @@ def zeggs_pca_workdir(zeggs_workdir, tiny_data, tmp_path_factory) -> pathlib.Pat
     """A copy of ``zeggs_workdir`` with a fitted style PCA (``jaxgest zeggs pca``); read-only."""
     from jaxgest import cli
 
-    work = tmp_path_factory.mktemp("tiny_zeggs_pca") / "zeggs_pca"
-    shutil.copytree(zeggs_workdir, work)
-    assert cli.main(["zeggs", "pca", "--workdir", str(work), "--data", str(tiny_data), "--window", "1.0"]) == 0
-    return work
+    def build(work):
+        shutil.copytree(zeggs_workdir, work)
+        assert cli.main(["zeggs", "pca", "--workdir", str(work), "--data", str(tiny_data), "--window", "1.0"]) == 0
+
+    return _built_once(tmp_path_factory, "zeggs_pca", build)[0]
 
 
 @pytest.fixture

@@ -15,11 +15,9 @@ from jaxgest.metrics import (
     path_distances,
 )
 
+from metrics_testing import random_walk
+
 SETTINGS = settings(max_examples=25, deadline=None)
-
-
-def _walk(rng, n, c=3):
-    return np.cumsum(rng.normal(size=(n, c)), axis=0)
 
 
 def _check_path(path, n, m):
@@ -37,7 +35,7 @@ def _check_path(path, n, m):
 @given(n=st.integers(1, 40), m=st.integers(1, 40), seed=st.integers(0, 2**31 - 1), walk=st.booleans())
 def test_dtw_matches_numpy_reference(n, m, seed, walk):
     rng = np.random.default_rng(seed)
-    a, b = (_walk(rng, n), _walk(rng, m)) if walk else (rng.normal(size=(n, 3)), rng.normal(size=(m, 3)))
+    a, b = (random_walk(rng, n), random_walk(rng, m)) if walk else (rng.normal(size=(n, 3)), rng.normal(size=(m, 3)))
     cost, path = dtw(a, b)
     ref_cost, ref_path = dtw_numpy(a, b)
     _check_path(path, n, m)
@@ -67,7 +65,7 @@ def test_dtw_golden_with_ties():
 
 
 def test_dtw_identity_is_zero_with_diagonal_path():
-    a = _walk(np.random.default_rng(1), 57, 6)
+    a = random_walk(np.random.default_rng(1), 57, 6)
     cost, path = dtw(a, a)
     assert cost == 0.0
     np.testing.assert_array_equal(path, np.stack([np.arange(57)] * 2, axis=1))
@@ -82,7 +80,7 @@ def test_dtw_cost_is_symmetric(n, m, seed):
 
 
 def test_dtw_frame_repetition_costs_nothing():
-    a = _walk(np.random.default_rng(2), 40)
+    a = random_walk(np.random.default_rng(2), 40)
     b = np.repeat(a, 3, axis=0)[2:]  # time-stretched copy (first frame kept once)
     cost, path = dtw(a, b)
     assert cost == pytest.approx(0.0, abs=1e-12)
@@ -140,7 +138,7 @@ def test_dtw_buckets():
 
 def test_dtw_longer_clip_against_reference():
     rng = np.random.default_rng(5)
-    a, b = _walk(rng, 150, 6), _walk(rng, 131, 6)
+    a, b = random_walk(rng, 150, 6), random_walk(rng, 131, 6)
     cost, path = dtw(a, b)
     ref_cost, ref_path = dtw_numpy(a, b)
     np.testing.assert_allclose(cost, ref_cost, rtol=1e-12)
@@ -151,7 +149,7 @@ def test_dtw_not_worse_than_fastdtw():
     fastdtw = pytest.importorskip("fastdtw")
     rng = np.random.default_rng(6)
     for n, m in [(90, 70), (120, 121), (5, 80)]:
-        a, b = _walk(rng, n, 6), _walk(rng, m, 6)
+        a, b = random_walk(rng, n, 6), random_walk(rng, m, 6)
         approx, approx_path = fastdtw.fastdtw(a, b, radius=1, dist=2)
         cost, _ = dtw(a, b)
         assert cost <= approx + 1e-9
@@ -162,7 +160,7 @@ def test_dtw_equals_fastdtw_with_full_radius():
     fastdtw = pytest.importorskip("fastdtw")
     rng = np.random.default_rng(7)
     for n, m in [(30, 25), (12, 40), (1, 9)]:
-        a, b = _walk(rng, n, 6), _walk(rng, m, 6)
+        a, b = random_walk(rng, n, 6), random_walk(rng, m, 6)
         exact, path = fastdtw.fastdtw(a, b, radius=max(n, m), dist=2)  # the window covers every cell
         cost, _ = dtw(a, b)
         assert cost == pytest.approx(exact, rel=1e-12)

@@ -23,11 +23,9 @@ from jaxgest.metrics import (
     window_statistics,
 )
 
+from metrics_testing import random_walk
+
 SETTINGS = settings(max_examples=25, deadline=None)
-
-
-def _walk(rng, n, c=3):
-    return np.cumsum(rng.normal(size=(n, c)), axis=0)
 
 
 # ------------------------------------------------------------------------------------------ content error
@@ -48,14 +46,14 @@ def test_summarize_errors(values, expected):
 
 
 def test_content_error_identity_and_time_warp_are_zero():
-    a = _walk(np.random.default_rng(7), 50, 6) * 0.01
+    a = random_walk(np.random.default_rng(7), 50, 6) * 0.01
     for b in (a, np.repeat(a, 2, axis=0)):
         assert content_error(a, b) == {"mean": 0.0, "worst": 0.0, "w25": 0.0}
 
 
 def test_content_error_matches_reference_alignment():
     rng = np.random.default_rng(8)
-    a, b = _walk(rng, 45, 6), _walk(rng, 38, 6)
+    a, b = random_walk(rng, 45, 6), random_walk(rng, 38, 6)
     _, path = dtw_numpy(a, b)
     comps = np.linalg.norm(a[path[:, 0]] - b[path[:, 1]], axis=1)
     np.testing.assert_allclose(content_error_components(a, b), comps, rtol=1e-9)
@@ -71,7 +69,7 @@ def test_content_error_static_offset_and_trim():
     a = np.tile(rng.normal(size=(1, 6)), (30, 1))
     off = np.array([0.3, 0.0, 0.4, 0.0, 0.0, 0.0])
     assert content_error(a, a + off)["mean"] == pytest.approx(0.5)
-    x, y = _walk(rng, 40, 6), _walk(rng, 44, 6)
+    x, y = random_walk(rng, 40, 6), random_walk(rng, 44, 6)
     assert content_error(x, y, trim=5) == content_error(x[5:-5], y[5:-5])
     with pytest.raises(DataError):
         content_error(x, y, trim=20)

@@ -14,6 +14,7 @@ import soundfile as sf
 
 from jaxgest.errors import CheckpointError, JaxgestError
 from jaxgest.motion import bvh
+from tiny_models import train_zeggs
 
 @pytest.fixture(scope="module")
 def trained(tiny_data, zeggs_trained):
@@ -69,6 +70,23 @@ def test_training_writes_everything_and_resumes(trained, copy_workdir):
     assert [r["step"] for r in lines][-1] == 8
     with pytest.raises(CheckpointError, match="does not match"):
         train(data, work, preset="tiny", steps=8, progress=False, overrides={"gru_hidden": 16})
+
+
+def test_training_again_in_one_process_reuses_the_compiled_step(trained, tmp_path, monkeypatch):
+    """jit's own cache serves every training of one config in a process (zeggs/train.py builds its step at
+    module level, the config static, the state without optimiser object): over two trainings into fresh
+    workdirs the step is traced at most once (none when the session's training already traced it), i.e. the
+    second training traces nothing."""
+    from jaxgest.zeggs import train as ztrain
+
+    traces = []
+    real = ztrain.make_train_step  # called only while jit traces the step
+    monkeypatch.setattr(ztrain, "make_train_step", lambda cfg: traces.append(cfg) or real(cfg))
+    runs = [train_zeggs(trained[0], tmp_path / "a", steps=1)]
+    first = len(traces)
+    runs.append(train_zeggs(trained[0], tmp_path / "b", steps=1))
+    assert all(r["steps"] == 1 and np.isfinite(r["final"]["loss"]) for r in runs)
+    assert first <= 1 and len(traces) == first, (first, len(traces))
 
 
 def test_generate_length_rig_and_seeds(trained, clips):

@@ -26,7 +26,8 @@ from jaxgest import parallel
 from jaxgest.errors import DataError, JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
-from jaxgest.training import MetricsLogger, TrainState, check_intervals, check_steps, train_loop
+from jaxgest.training import (MetricsLogger, TrainState, bare_state, check_intervals, check_steps,
+                              jit_config_step, train_loop)
 from jaxgest.zeggs import data as zdata
 from jaxgest.zeggs import features
 from jaxgest.zeggs import workdir as wd
@@ -42,6 +43,14 @@ def config_for(preset: str, skeleton, overrides: Optional[dict] = None) -> Confi
                           **{**features.fk_fields(skeleton), **(overrides or {})})
     except ValueError as e:
         raise DataError(str(e)) from None
+
+
+def _train_step(state, batch, key, stats, cfg: Config):
+    """One step of :func:`jaxgest.zeggs.steps.make_train_step` on a bare state (:func:`jaxgest.training.
+    bare_state`), the optimiser rebuilt from the static config: module-level, so jit's own cache serves every
+    training of one config in a process (:func:`jaxgest.training.jit_config_step`)."""
+    state, metrics = make_train_step(cfg)(state.replace(tx=make_optimizer(cfg)), batch, key, stats)
+    return bare_state(state), metrics
 
 
 def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = None, seed: int = 0,
@@ -96,15 +105,13 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
         wd.write_config(workdir, cfg, preset=preset, steps=steps, seed=seed, data=data_dir, skeleton=skeleton,
                         info=info)
 
-    tx = make_optimizer(cfg)
     params = init_params(model, jax.random.key(seed))
-    state = TrainState.create(apply_fn=None, params=params, tx=tx).replace(step=jnp.asarray(0, jnp.int32))
-    state = parallel.replicate(state, mesh)
+    state = TrainState.create(apply_fn=None, params=params, tx=make_optimizer(cfg))
+    state = parallel.replicate(bare_state(state.replace(step=jnp.asarray(0, jnp.int32))), mesh)
     state = ckpt.restore(state)
     start = int(jax.device_get(state.step))
     stats = parallel.replicate(stats_arrays(model, data.pose_stats.mean, data.pose_stats.std), mesh)
-    jitted = parallel.parallelize_step(make_train_step(cfg), mesh, extra_args=1,
-                                       compiler_options=tcfg.compiler_options)
+    jitted = jit_config_step(_train_step, mesh, cfg, extra_args=1, compiler_options=tcfg.compiler_options)
 
     def step_fn(state, batch, key):
         return jitted(state, batch, key, stats)

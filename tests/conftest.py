@@ -85,9 +85,27 @@ COSTLIEST_FIRST = (
 )
 
 
+def _warm_numba_cache():
+    """Compile librosa's numba-cached functions once, in this process, before any xdist worker starts.
+
+    On a fresh install two workers would otherwise compile and write the same numba cache files at the same
+    time, which can leave a corrupt cache entry (seen once: every later ``peak_pick`` call segfaulted).
+    """
+    import numpy as np
+
+    from jaxgest.audio import log_mel_energy
+    from jaxgest.metrics.generation import onset_times
+
+    y = np.sin(np.linspace(0.0, 800.0, 16000)).astype(np.float32) * np.repeat(np.arange(8) % 2, 2000)
+    onset_times(y, 16000)
+    log_mel_energy(y, 16000)
+
+
 def pytest_configure(config):
     if hasattr(config.option, "loadscopereorder"):  # pytest-xdist: keep the order of COSTLIEST_FIRST
         config.option.loadscopereorder = False
+    if not hasattr(config, "workerinput"):  # the controller (or a plain run): before any worker exists
+        _warm_numba_cache()
 
 
 def pytest_collection_modifyitems(config, items):

@@ -5,7 +5,7 @@ data folder: ``--data`` or the built-in synthetic data). The workdir layout and 
 in :mod:`jaxgest.tgst.workdir`; config.json stores the effective :class:`~jaxgest.tgst.config.Config`
 (windows fitted to the data).
 
-Both stages use optax Adam (§3.5), one jit-compiled step each (:func:`jaxgest.parallel.parallelize_step`,
+Both stages use optax Adam (§3.5), one jit-compiled step each (:func:`jaxgest.training.jit_config_step`,
 state donated, batch split over the devices) and :func:`jaxgest.training.train_loop` (NaN stop, tqdm,
 checkpoints). A run resumes from the latest checkpoint of each stage; a finished autoencoder is not
 retrained. The transformer's checkpoint records the autoencoder step it was trained on: when the autoencoder
@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import optax
 
 from jaxgest import parallel, training
+from jaxgest.training import bare_state, jit_config_step
 from jaxgest.errors import DataError, JaxgestError
 from jaxgest.tgst import autoencoder
 from jaxgest.tgst import data as tdata
@@ -125,21 +126,14 @@ def transformer_optimizer(cfg: Config) -> optax.GradientTransformation:
     return optax.adam(cfg.train.transformer.learning_rate)
 
 
-# The two jitted steps. The optimiser is built INSIDE the step from the (frozen, hashable, static) config and
-# the state passed in carries neither ``tx`` nor ``apply_fn`` (:func:`_bare`): both are static fields of a
-# TrainState, i.e. part of the jit cache key, and a fresh ``optax.adam`` / module per ``train`` call would
-# never match it. The cache key is then (config, shapes, shardings) and jit's own cache serves every training
-# of one config in a process (resume, tests); nothing is memoised here.
-
-def _bare(state):
-    """``state`` without its static fields (optimiser object, apply function): params, opt_state, step."""
-    return state.replace(apply_fn=None, tx=None)
-
+# The two jitted steps, on bare states (:func:`jaxgest.training.bare_state`) with the optimiser built inside
+# from the static config and compiled by :func:`jaxgest.training.jit_config_step`: jit's own cache serves
+# every training of one config in a process (resume, tests); nothing is memoised here.
 
 def _ae_step(state, batch, key, cfg: Config):
     tx = ae_optimizer(cfg)
     state, metrics = make_ae_train_step(cfg, tx)(state.replace(tx=tx), batch, key)
-    return _bare(state), metrics
+    return bare_state(state), metrics
 
 
 def _transformer_step(state, batch, key, ae_params, cfg: Config):
@@ -148,18 +142,7 @@ def _transformer_step(state, batch, key, ae_params, cfg: Config):
     autoencoder (resumed runs, tests)."""
     tx = transformer_optimizer(cfg)
     state, metrics = make_transformer_train_step(cfg, tx, ae_params)(state.replace(tx=tx), batch, key)
-    return _bare(state), metrics
-
-
-def jitted_step(step, mesh, cfg: Config, extra_args: int = 0):
-    """``step`` (:func:`_ae_step`; :func:`_transformer_step` with ``extra_args=1``) jit-compiled
-    data-parallel over ``mesh``, ``cfg`` bound: ``(state, batch, key, *extra) -> (state, metrics)``, with the
-    shardings of :func:`jaxgest.parallel.parallelize_step` (state, key and extra arguments replicated, batch
-    split, state donated). ``state`` must be :func:`_bare`."""
-    rep, data = parallel.replicated(mesh), parallel.data_sharding(mesh)
-    jitted = jax.jit(step, in_shardings=(rep, data, rep) + (rep,) * extra_args, out_shardings=(rep, rep),
-                     static_argnums=(3 + extra_args,), donate_argnums=(0,))
-    return lambda state, batch, key, *extra: jitted(state, batch, key, *extra, cfg)
+    return bare_state(state), metrics
 
 
 def _int32_step(state):
@@ -233,9 +216,9 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
                "windows": {"ae": cfg.train.autoencoder.window, "transformer": cfg.train.transformer.window}}
 
     # ---- stage 1: autoencoder
-    ae_step_fn = jitted_step(_ae_step, mesh, cfg)
+    ae_step_fn = jit_config_step(_ae_step, mesh, cfg)
     ae_state = parallel.replicate(
-        _bare(_int32_step(create_ae_state(cfg, params0["autoencoder"], ae_optimizer(cfg)))), mesh)
+        bare_state(_int32_step(create_ae_state(cfg, params0["autoencoder"], ae_optimizer(cfg)))), mesh)
     ae_state = ae_ckpt.restore(ae_state)
     ae_logger = training.MetricsLogger(workdir, extra={"stage": "autoencoder", **info})
     last = {}
@@ -250,9 +233,9 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     # ---- stage 2: transformer (autoencoder frozen, a step argument)
     summary["stale_transformer"] = set_aside_stale_transformer(workdir, stored_transformer, ae_done)
     tr_ckpt = transformer_checkpointer(workdir, cfg.model, ae_done)
-    tr_step_fn = jitted_step(_transformer_step, mesh, cfg, extra_args=1)
+    tr_step_fn = jit_config_step(_transformer_step, mesh, cfg, extra_args=1)
     tr_state = create_transformer_state(cfg, params0["transformer"], transformer_optimizer(cfg))
-    tr_state = parallel.replicate(_bare(_int32_step(tr_state)), mesh)
+    tr_state = parallel.replicate(bare_state(_int32_step(tr_state)), mesh)
     tr_state = tr_ckpt.restore(tr_state)
     tr_logger = training.MetricsLogger(workdir, extra={"stage": "transformer", **info})
     tr_state, summary["transformer"] = _run_stage(

@@ -2,8 +2,10 @@
 
 * :func:`quiet_absl`: absl logging raised to CRITICAL around orbax calls that log expected messages;
 * :func:`closed_loop_errors_muted`: drops the "RuntimeError: Event loop is closed" unraisable errors that
-  tensorstore callbacks raise after orbax gives up on a damaged checkpoint (reentrant, restores the
-  previous ``sys.unraisablehook``); :func:`mute_closed_loop_errors_for_process` for an entry point.
+  tensorstore callbacks raise after orbax gives up on a damaged checkpoint, and asyncio's "Task exception was
+  never retrieved" log records of the tensorstore reads orbax abandoned (reentrant, restores the previous
+  ``sys.unraisablehook`` and removes its logging filter); :func:`mute_closed_loop_errors_for_process` for an
+  entry point.
 """
 
 from __future__ import annotations
@@ -41,12 +43,40 @@ def _closed_loop_hook(unraisable):
     (_MUTE_PREVIOUS or sys.__unraisablehook__)(unraisable)
 
 
+_ORPHAN_MESSAGES = ("Task exception was never retrieved", "Future exception was never retrieved")
+
+
+def _is_orbax_noise(exc: BaseException | None) -> bool:
+    """An exception of an abandoned tensorstore read/write or of orbax's closed loop (and nothing else)."""
+    if exc is None:
+        return False
+    if isinstance(exc, RuntimeError) and str(exc) == "Event loop is closed":
+        return True
+    return "tensorstore" in type(exc).__module__ or "tensorstore_spec" in str(exc)
+
+
+class _OrphanTaskFilter(logging.Filter):
+    """Drops asyncio's "Task exception was never retrieved" records whose exception is :func:`_is_orbax_noise`:
+    when orbax gives up on a damaged checkpoint, the reads of its other arrays fail later, unobserved, and
+    asyncio logs each one (with a traceback) when the task is garbage-collected, at any later moment."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not str(record.msg).startswith(_ORPHAN_MESSAGES):
+            return True
+        exc = record.exc_info[1] if record.exc_info else None
+        return not _is_orbax_noise(exc)
+
+
+_ORPHAN_FILTER = _OrphanTaskFilter()
+
+
 def _mute_enter() -> None:
     global _MUTE_DEPTH, _MUTE_PREVIOUS
     with _MUTE_LOCK:
         if _MUTE_DEPTH == 0:
             _MUTE_PREVIOUS = sys.unraisablehook
             sys.unraisablehook = _closed_loop_hook
+            logging.getLogger("asyncio").addFilter(_ORPHAN_FILTER)
         _MUTE_DEPTH += 1
 
 
@@ -58,12 +88,14 @@ def _mute_exit() -> None:
             if sys.unraisablehook is _closed_loop_hook:
                 sys.unraisablehook = _MUTE_PREVIOUS
             _MUTE_PREVIOUS = None
+            logging.getLogger("asyncio").removeFilter(_ORPHAN_FILTER)
 
 
 @contextlib.contextmanager
 def closed_loop_errors_muted():
     """Within this context, drop the "RuntimeError: Event loop is closed" tracebacks (and only those) that
-    ``sys.unraisablehook`` would print.
+    ``sys.unraisablehook`` would print, and asyncio's "Task exception was never retrieved" records of abandoned
+    tensorstore reads (:class:`_OrphanTaskFilter`; other tasks' records pass).
 
     When orbax gives up on a damaged checkpoint (or a failed save), tensorstore still completes the
     outstanding reads/writes and their callbacks hit orbax's already closed asyncio loop: each prints such a

@@ -130,3 +130,35 @@ def test_checkpointer_has_no_process_wide_side_effects(tmp_path, monkeypatch):
         seen = []
         sys.unraisablehook = seen.append  # someone else replaces it meanwhile
     assert sys.unraisablehook == seen.append  # not clobbered on exit
+
+
+def test_orphan_tensorstore_task_records_are_dropped_only_while_muted(caplog):
+    """asyncio's "Task exception was never retrieved" of an abandoned tensorstore read (the noise of a damaged
+    checkpoint: it surfaced at garbage collection in a `tgst transfer` process) is dropped while the filter is
+    installed; an unrelated task's record still passes, and nothing is dropped after the context ends."""
+    import asyncio
+    import gc
+
+    from jaxgest import orbax_noise
+
+    def orphan(message):
+        async def fail():
+            raise ValueError(message)
+
+        loop = asyncio.new_event_loop()
+        task = loop.create_task(fail())
+        loop.run_until_complete(asyncio.sleep(0))
+        assert task.done()
+        del task
+        loop.close()
+        gc.collect()
+
+    noise = "OUT_OF_RANGE: Error reading byte range [tensorstore_spec='{\"driver\":\"zarr\"}']"
+    with caplog.at_level("ERROR", logger="asyncio"):
+        with orbax_noise.closed_loop_errors_muted():
+            orphan(noise)
+            orphan("a real bug in user code")
+        assert [r.exc_info[1].args[0] for r in caplog.records] == ["a real bug in user code"]
+        caplog.clear()
+        orphan(noise)  # the filter is gone with the context
+        assert [r.exc_info[1].args[0] for r in caplog.records] == [noise]

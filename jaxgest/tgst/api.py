@@ -128,18 +128,21 @@ class TGSTModel:
         up, lo, _ = fn(self.params, np.asarray(content_upper)[None], np.asarray(style_upper)[None])
         return np.asarray(up[0]), np.asarray(lo[0])
 
-    def to_motion(self, upper: np.ndarray, lower: np.ndarray, content: Motion) -> Motion:
+    def to_motion(self, upper: np.ndarray, lower: np.ndarray, content: Motion,
+                  tolerance: Optional[float] = None) -> Motion:
         """Body exp-maps at the model rate ``(F', 39)``, ``(F', 24)`` -> a Motion on ``content``'s skeleton.
 
         Resampled to the content's frame times, written with the content's root yaw and horizontal path,
-        the root height set per frame so the lowest foot/toe joint is at the content's lowest foot/toe
-        height on that frame (:func:`content_floor_contact`).
+        the root height set so the lowest foot/toe joint is at the content's lowest foot/toe height, within
+        ``tolerance`` on the content's contact frames (:func:`content_floor_contact`; default
+        :data:`CONTACT_TOLERANCE`, 0 = per frame).
         References: Kuriyama et al. 2022, §3.1 (root position by forward kinematics from the feet).
         """
         F = content.num_frames
         up = resample_body(upper, self.cfg.fps, content.fps, F)
         lo = resample_body(lower, self.cfg.fps, content.fps, F)
-        return content_floor_contact(body.body_to_motion(up, lo, content, floor=False), content)
+        tol = CONTACT_TOLERANCE if tolerance is None else tolerance
+        return content_floor_contact(body.body_to_motion(up, lo, content, floor=False), content, tolerance=tol)
 
     def transfer(self, content: Motion, style: Motion, method: str = "soft", name: Optional[str] = None) -> Motion:
         """``content`` performed in the style of ``style``, on the content's skeleton (module docstring)."""
@@ -156,16 +159,41 @@ def foot_names(skeleton) -> list[str]:
     return body.rig_joints(skeleton, body.FEET)
 
 
-def content_floor_contact(result: Motion, content: Motion) -> Motion:
-    """``result`` with its root height set per frame so its lowest foot/toe joint is at the height of
-    ``content``'s lowest foot/toe joint on that frame (same skeleton and frame count).
+CONTACT_TOLERANCE = 0.0
+"""Default ``tolerance`` of :func:`content_floor_contact` (file units: cm on Bandai-Namco and ZEGGS)."""
+CONTACT_BAND = 1.0
+"""A content frame is a contact frame when its lowest foot/toe joint is within this of the clip's lowest."""
 
-    Keeps the content's contact height (its foot joints' height above the floor when standing) on contact
-    frames and its flight phases where it leaves the floor; only the root's vertical coordinate changes.
-    References: Kuriyama et al. 2022, §3.1 (root position by forward kinematics from the feet).
+
+def content_contact_frames(content: Motion, band: float = CONTACT_BAND) -> np.ndarray:
+    """``(F,)`` bools: the frames where ``content``'s lowest foot/toe joint is within ``band`` (file units)
+    of its lowest height over the clip (standing or stepping, not in the air)."""
+    low = K.lowest_foot_height(content, foot_names(content.skeleton))
+    return low < low.min() + band
+
+
+def content_floor_contact(result: Motion, content: Motion, tolerance: float = CONTACT_TOLERANCE) -> Motion:
+    """``result`` with its root height set so its lowest foot/toe joint is at the height of ``content``'s
+    lowest foot/toe joint, within ``tolerance`` on the content's contact frames (same skeleton and frame
+    count).
+
+    ``tolerance=0``: the per-frame contact of SPEC §3.1 on every frame (flight phases included:
+    :func:`jaxgest.motion.kinematics.floor_contact`). ``tolerance > 0``: on the contact frames
+    (:func:`content_contact_frames`) the lowest foot joint stays within ``tolerance`` of the content's, the
+    other frames (the content in the air) are free, and the root's vertical shift is the one of least total
+    variation (:func:`jaxgest.motion.kinematics.floor_contact_tube`): errors of the decoded legs no longer
+    move the whole body up and down on every frame (experiments/tgst_bandai/README.md, section 2c). Keeps
+    the content's contact height (its foot joints' height above the floor when standing); only the root's
+    vertical coordinate changes.
+    References: Kuriyama et al. 2022, §3.1 (root position by forward kinematics from the feet). Difference
+    (``tolerance > 0``): the lowest foot is within ``tolerance`` of the content's on contact frames, not on it.
     """
     feet = foot_names(content.skeleton)
-    return K.floor_contact(result, feet=feet, height=K.lowest_foot_height(content, feet))
+    height = K.lowest_foot_height(content, feet)
+    if tolerance == 0:
+        return K.floor_contact(result, feet=feet, height=height)
+    return K.floor_contact_tube(result, feet=feet, height=height, tolerance=tolerance,
+                                contact=content_contact_frames(content))
 
 
 def load_model(workdir) -> TGSTModel:

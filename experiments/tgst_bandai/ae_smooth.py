@@ -130,7 +130,7 @@ def run(name, steps, args):
     if contact == "content":  # root written as the content's (TGSTModel.to_motion without the floor contact)
         from jaxgest.tgst import api
 
-        api.content_floor_contact = lambda result, content: result
+        api.content_floor_contact = lambda result, content, **kw: result
     rt = roundtrip(mcfg, clips, outs)
     from jaxgest.motion import body
 

@@ -1,7 +1,7 @@
 """Autoencoder and swap diagnostics on the held-out clips: what the model does before any style is involved.
 
     python experiments/tgst_bandai/diagnose.py WORKDIR EVAL_DIR OUT.json [TRAIN_DIR] [--ae-step N] [--no-swap]
-        [--edge-frames N] [--angles-only]
+        [--edge-frames N] [--angles-only] [--contact-tolerance T]
 
 1. Reconstruction against baselines with the same inputs (upper body, 13 joints, model rate, geodesic
    angle per joint, degrees): the autoencoder round trip (jaxgest.tgst.model.reconstruct: the clip-end
@@ -13,7 +13,11 @@
    x's skeleton as `jaxgest tgst transfer --method autoencoder` does (TGSTModel.to_motion), and compared
    with x: mean arm-joint speed ratio (world positions, forward differences, 8 arm joints) overall and on
    frames 0-5, per-joint interior speed ratio (frames 6 .. F-7), style and content error of the round trip
-   under the world protocol and the authors' protocol (jaxgest.tgst.evaluate).
+   under the world protocol and the authors' protocol (jaxgest.tgst.evaluate), and the foot criterion of
+   issue 12: on the content's contact frames (``api.content_contact_frames``: its lowest foot/toe joint within
+   1 cm of its clip minimum) the largest |output lowest foot - content lowest foot| and the fraction of those
+   frames within 1 cm. ``--contact-tolerance T`` writes the round trips with that floor-contact tolerance
+   (default: the API's, ``api.CONTACT_TOLERANCE``; 0 = per-frame contact).
 3. Swap diagnostics (needs a trained transformer; skip with --no-swap) on the inter pairs of the held-out
    contents via jaxgest.tgst.model.swap_weights: mean largest soft-swap weight, effective number of blended
    style tokens 1 / sum w^2, fraction of content tokens whose argmax style token lies within +-1 index of
@@ -80,6 +84,8 @@ def main(argv) -> int:
     ap.add_argument("--angles-only", action="store_true", help="section 1 only (no round trips, no swap)")
     ap.add_argument("--edge-frames", type=int, default=None,
                     help="override the config's edge padding (0 = the old end-only padding, for comparison)")
+    ap.add_argument("--contact-tolerance", type=float, default=None,
+                    help="floor-contact tolerance of the round trips in cm (default: the API's; 0 = per frame)")
     args = ap.parse_args(argv[1:])
     cfg, params = load_params(args.workdir, args.ae_step, transformer=not args.no_swap)
     if args.edge_frames is not None:
@@ -163,7 +169,7 @@ def main(argv) -> int:
         return 0
 
     # ---- 2. round trips as motions at the clip rate (written like `jaxgest tgst transfer` writes a result)
-    report["roundtrip"] = roundtrip(cfg, clips, ae_out)
+    report["roundtrip"] = roundtrip(cfg, clips, ae_out, tolerance=args.contact_tolerance)
 
     # ---- 3. swap diagnostics on inter pairs
     if not args.no_swap:
@@ -181,25 +187,29 @@ def main(argv) -> int:
     return 0
 
 
-def roundtrip(cfg, clips, outs) -> dict:
+def roundtrip(cfg, clips, outs, tolerance=None) -> dict:
     """Section 2 for any reconstruction: ``outs`` = ``(upper, lower)`` exp-maps at the model rate per clip of
-    ``clips``, written as motions on each clip's skeleton (``TGSTModel.to_motion``) and compared with it."""
+    ``clips``, written as motions on each clip's skeleton (``TGSTModel.to_motion`` with floor-contact
+    ``tolerance``, default the API's) and compared with it."""
     from jaxgest.motion import kinematics
+    from jaxgest.tgst import api
     from jaxgest.tgst.api import TGSTModel
     from jaxgest.tgst.evaluate import _joint_indices, get_protocol
 
     writer = TGSTModel(cfg, None)
+    tolerance = api.CONTACT_TOLERANCE if tolerance is None else tolerance
     rows = []
     for clip, (u_hat, l_hat) in zip(clips, outs):
         x = clip.motion
-        y = writer.to_motion(u_hat, l_hat, x)
+        y = writer.to_motion(u_hat, l_hat, x, tolerance=tolerance)
+        foot = foot_criterion(y, x)
         arms = _joint_indices(x, body.ARMS)
         sx, sy = (np.linalg.norm(np.diff(kinematics.forward_kinematics(m)[:, arms], axis=0), axis=-1)
                   * x.fps * 0.01 for m in (x, y))  # (F-1, 8) world arm-joint speeds, m/s, forward differences
         r = {"clip": clip.path.name, "speed_ratio": float(sy.mean() / sx.mean()),
              "speed_ratio_0_5": float(sy[:6].mean() / sx[:6].mean()),
              "joint_interior_ratio": (sy[6:-6].mean(0) / sx[6:-6].mean(0)).tolist(),
-             "first_step_speed": float(sy[0].mean()), "first_step_speed_input": float(sx[0].mean())}
+             "first_step_speed": float(sy[0].mean()), "first_step_speed_input": float(sx[0].mean()), **foot}
         window = metrics.window_for_fps(x.fps)
         for proto in ("world", "authors"):
             try:
@@ -220,7 +230,25 @@ def roundtrip(cfg, clips, outs) -> dict:
         **{f"{k}_{p}": float(np.mean([r[f"{k}_{p}"] for r in rows if f"{k}_{p}" in r]))
            for k in ("style", "content") for p in ("world", "authors")},
         **{f"clips_{p}": sum(f"style_{p}" in r for r in rows) for p in ("world", "authors")},
+        "contact_tolerance": tolerance,
+        "foot_max_dev": float(max(r["foot_max_dev"] for r in rows)),
+        "foot_within_1cm": float(sum(r["foot_within_1cm"] * r["contact_frames"] for r in rows)
+                                 / max(1, sum(r["contact_frames"] for r in rows))),
         "clips": rows}
+
+
+def foot_criterion(y, x) -> dict:
+    """Issue 12's foot criterion of an output ``y`` written on content ``x``: on x's contact frames
+    (``api.content_contact_frames``) the largest |lowest foot/toe height of y - that of x| (file units, cm on
+    Bandai-Namco) and the fraction of contact frames where it is below 1 cm."""
+    from jaxgest.motion import kinematics
+    from jaxgest.tgst import api
+
+    feet = api.foot_names(x.skeleton)
+    contact = api.content_contact_frames(x)
+    dev = np.abs(kinematics.lowest_foot_height(y, feet) - kinematics.lowest_foot_height(x, feet))[contact]
+    return {"contact_frames": int(contact.sum()), "foot_max_dev": float(dev.max()) if len(dev) else 0.0,
+            "foot_within_1cm": float((dev < 1.0).mean()) if len(dev) else 1.0}
 
 
 def swap_stats(w: np.ndarray) -> dict:

@@ -79,7 +79,7 @@ def test_tube_holds_on_contact_frames_and_moves_least(seed, F, tol, p_contact, w
     p0, p1 = K.forward_kinematics(m), K.forward_kinematics(out)
     np.testing.assert_allclose(p1[..., [0, 2]], p0[..., [0, 2]], atol=1e-9)  # only heights change
     shift = (p1[:, :, 1] - p0[:, :, 1])[:, int(wrapper):]  # the static wrapper stays
-    np.testing.assert_allclose(shift, shift[:, :1].repeat(shift.shape[1], 1), atol=1e-9)  # rigid vertical move
+    np.testing.assert_allclose(shift, shift[:, :1].repeat(shift.shape[1], 1), atol=1e-9)  # rigid, vertical
     s_tube, s_frame = low - lowest(m), lowest(per_frame) - lowest(m)
     assert tv(s_tube) <= tv(s_frame) + 1e-9
     assert np.sum(np.diff(s_tube) ** 2) <= np.sum(np.diff(s_frame) ** 2) + 1e-9
@@ -145,7 +145,8 @@ def test_taut_string_is_least_total_variation(seed, F):
         A[2 * i, [i, i + 1, F + i]] = [-1, 1, -1]
         A[2 * i + 1, [i, i + 1, F + i]] = [1, -1, -1]
     bounds = [(a if np.isfinite(a) else None, b if np.isfinite(b) else None) for a, b in zip(lo, hi)]
-    res = linprog(np.r_[np.zeros(F), np.ones(m)], A_ub=A, b_ub=np.zeros(2 * m), bounds=bounds + [(0, None)] * m)
+    res = linprog(np.r_[np.zeros(F), np.ones(m)], A_ub=A, b_ub=np.zeros(2 * m),
+                  bounds=bounds + [(0, None)] * m)
     assert res.status == 0 and tv(x) <= res.fun + 1e-7
 
 
@@ -157,7 +158,8 @@ def test_content_floor_contact_tolerance():
 
     content = render_clip("greeting", "sad", seed=0)[0]
     F = content.num_frames
-    jump = np.where((np.arange(F) > 100) & (np.arange(F) < 160), 15 * np.sin(np.pi * (np.arange(F) - 100) / 60), 0)
+    t = np.arange(F)
+    jump = np.where((t > 100) & (t < 160), 15 * np.sin(np.pi * (t - 100) / 60), 0)
     hips = K.forward_kinematics(content)[:, K._hips_index(content.skeleton)]
     content = K.set_root_position(content, hips + jump[:, None] * np.array([0.0, 1.0, 0.0]))
     rng = np.random.default_rng(0)
@@ -171,9 +173,11 @@ def test_content_floor_contact_tolerance():
     contact = api.content_contact_frames(content)
     assert 0 < (~contact).sum() < F // 2
     today = api.content_floor_contact(result, content, tolerance=0.0)
-    np.testing.assert_array_equal(today.translations, K.floor_contact(result, feet=feet, height=c_low).translations)
+    per_frame = K.floor_contact(result, feet=feet, height=c_low)
+    np.testing.assert_array_equal(today.translations, per_frame.translations)
     tube = api.content_floor_contact(result, content, tolerance=0.9)
     assert np.abs(K.lowest_foot_height(tube, feet) - c_low)[contact].max() <= 0.9 + 1e-9
     h = K._hips_index(content.skeleton)
-    y = {k: K.forward_kinematics(m)[:, h, 1] - hips[:, 1] - jump for k, m in (("today", today), ("tube", tube))}
+    y = {k: K.forward_kinematics(m)[:, h, 1] - hips[:, 1] - jump
+         for k, m in (("today", today), ("tube", tube))}
     assert tv(y["tube"]) < tv(y["today"])

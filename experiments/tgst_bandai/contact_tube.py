@@ -7,7 +7,7 @@ Each held-out clip x is re-encoded and decoded (``jaxgest.tgst.model.reconstruct
 resampled and written on x's skeleton with x's root path (``body.body_to_motion(..., floor=False)``: the
 content's own root height), then its root height is set by each contact variant:
 
-* ``frame``: the per-frame contact of today (``content_floor_contact(tolerance=0)`` = ``K.floor_contact``): the
+* ``frame``: the per-frame contact (``content_floor_contact(tolerance=0)`` = ``K.floor_contact``): the
   lowest foot/toe joint at the content's lowest foot/toe height on every frame;
 * ``tube_T`` (T in cm): ``K.floor_contact_tube`` with tolerance T on the content's contact frames
   (``api.content_contact_frames``: the content's lowest foot joint within 1 cm of its clip minimum, the
@@ -97,7 +97,7 @@ def main(argv) -> int:
         x = clip.motion
         up, lo = body_upper_lower(x, cfg.fps)
         f = len(up)
-        upad = np.concatenate([up, np.repeat(up[-1:], -f % 128, axis=0)])  # as diagnose.py: fewer compilations
+        upad = np.concatenate([up, np.repeat(up[-1:], -f % 128, axis=0)])  # as diagnose.py: few compilations
         u_hat, l_hat = (np.asarray(a)[0, :f] for a in rec_jit(params["autoencoder"], upad))
         angle = float(np.degrees(np.asarray(angular_error_rad(u_hat, up))).mean())
         F = x.num_frames
@@ -117,8 +117,8 @@ def main(argv) -> int:
         for tol in TOLS:
             variants[f"tube_{tol:g}"] = K.floor_contact_tube(written["decoded"], feet=feet, height=c_low,
                                                              tolerance=tol, contact=contact)
-        variants["lazy_0.9"] = K.shift_root_height(
-            written["decoded"], lazy_path(np.where(contact, s - 0.9, -np.inf), np.where(contact, s + 0.9, np.inf)))
+        lazy = lazy_path(np.where(contact, s - 0.9, -np.inf), np.where(contact, s + 0.9, np.inf))
+        variants["lazy_0.9"] = K.shift_root_height(written["decoded"], lazy)
         arms = _joint_indices(x, body.ARMS)
         sx = arm_speeds(x, arms)
         fx = {}
@@ -131,8 +131,10 @@ def main(argv) -> int:
         hips = K.forward_kinematics(x)[:, K._hips_index(x.skeleton), x.skeleton.up_axis]
         r = {"clip": clip.path.name, "frames": F, "fps": x.fps, "angle_deg": angle,
              "contact_frames": int(contact.sum()),
-             "shift": {"std_cm": float(s.std()), "abs_mean_cm": float(abs(s.mean())), "mean_abs_step_cm_s": float(np.abs(np.diff(s)).mean() * x.fps),
-                       "max_abs_step_cm": float(np.abs(np.diff(s)).max()), "tv_cm": float(np.abs(np.diff(s)).sum()),
+             "shift": {"std_cm": float(s.std()), "abs_mean_cm": float(abs(s.mean())),
+                       "mean_abs_step_cm_s": float(np.abs(np.diff(s)).mean() * x.fps),
+                       "max_abs_step_cm": float(np.abs(np.diff(s)).max()),
+                       "tv_cm": float(np.abs(np.diff(s)).sum()),
                        "content_root_vertical_speed_cm_s": float(np.abs(np.diff(hips)).mean() * x.fps)},
              "variants": {}}
         ref_y = K.lowest_foot_height(written["decoded"], feet)
@@ -140,8 +142,10 @@ def main(argv) -> int:
             sy = arm_speeds(y, arms)
             o_low = K.lowest_foot_height(y, feet)
             dev = np.abs(o_low - c_low)[contact]
-            shift_path = o_low - (ref_y if not name.startswith("true") else K.lowest_foot_height(written["true"], feet))
-            v = {"speed_ratio": float(sy.mean() / sx.mean()), "speed_ratio_0_5": float(sy[:6].mean() / sx[:6].mean()),
+            base = K.lowest_foot_height(written["true"], feet) if name.startswith("true") else ref_y
+            shift_path = o_low - base
+            v = {"speed_ratio": float(sy.mean() / sx.mean()),
+                 "speed_ratio_0_5": float(sy[:6].mean() / sx[:6].mean()),
                  "joint_interior_ratio": (sy[6:-6].mean(0) / sx[6:-6].mean(0)).tolist(),
                  "foot_max_dev_cm": float(dev.max()) if len(dev) else 0.0,
                  "foot_within_1cm": float((dev < 1.0).mean()) if len(dev) else 1.0,
@@ -151,17 +155,17 @@ def main(argv) -> int:
                 try:
                     if proto not in fx:
                         raise ValueError(f"clip too short for the {proto} protocol")
-                    e = features_errors(clip_features(y, protocol=proto), fx[proto],
-                                        clip_features(x, protocol=proto, reference=get_protocol(proto).mirror_style),
-                                        window=window)
+                    ref = clip_features(x, protocol=proto, reference=get_protocol(proto).mirror_style)
+                    e = features_errors(clip_features(y, protocol=proto), fx[proto], ref, window=window)
                     v[f"style_{proto}"], v[f"content_{proto}"] = e["style"]["mean"], e["content"]["mean"]
                 except Exception as err:  # too short for the protocol's cut or one window
                     v[f"skipped_{proto}"] = str(err)
             r["variants"][name] = v
         rows.append(r)
-        print(clip.path.name, F, int(contact.sum()), {k: round(v["speed_ratio"], 3) for k, v in r["variants"].items()},
-              flush=True)
-    out = {"workdir": args.workdir, "ae_step": args.ae_step, "contact_band_cm": api.CONTACT_BAND, "clips": rows}
+        print(clip.path.name, F, int(contact.sum()),
+              {k: round(v["speed_ratio"], 3) for k, v in r["variants"].items()}, flush=True)
+    out = {"workdir": args.workdir, "ae_step": args.ae_step, "contact_band_cm": api.CONTACT_BAND,
+           "clips": rows}
     pathlib.Path(args.out).write_text(json.dumps(out, indent=1))
     return 0
 
@@ -192,16 +196,18 @@ def table(paths) -> None:
           f"(k/n) = clips below 0); {len(allc)} clip round trips; angle (deg, all variants) "
           f"{np.mean([c['angle_deg'] for c in allc]):.2f}; contact frames "
           f"{sum(c['contact_frames'] for c in allc)} / {sum(c['frames'] for c in allc)}")
-    print(f"shift s(t): |clip mean| {sh['abs_mean_cm'].mean():.2f} cm, std {sh['std_cm'].mean():.2f} cm, mean |step| {sh['mean_abs_step_cm_s'].mean():.2f} cm/s "
-          f"(content root vertical speed {sh['content_root_vertical_speed_cm_s'].mean():.2f} cm/s), "
-          f"max step {sh['max_abs_step_cm'].mean():.2f} cm (mean of clip maxima), TV {sh['tv_cm'].mean():.1f} cm\n")
+    print(f"shift s(t): |clip mean| {sh['abs_mean_cm'].mean():.2f} cm, std {sh['std_cm'].mean():.2f} cm, "
+          f"mean |step| {sh['mean_abs_step_cm_s'].mean():.2f} cm/s (content root vertical speed "
+          f"{sh['content_root_vertical_speed_cm_s'].mean():.2f} cm/s), max step "
+          f"{sh['max_abs_step_cm'].mean():.2f} cm (mean of clip maxima), TV {sh['tv_cm'].mean():.1f} cm\n")
     print("| contact | arm speed ratio overall / 0-5 | - frame, overall (paired) | - frame, 0-5 (paired) | "
-          "per-joint interior ratio (shoulders / upper arms / lower arms / hands) | style world / authors (m/s) | "
+          "per-joint interior ratio (shoulders / upper arms / lower arms / hands) | "
+          "style world / authors (m/s) | "
           "content world (m) | foot max dev on contact frames (cm): mean / max over clips | within 1 cm | "
           "shift TV (cm) / max step (cm) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for n in names:
-        jr = np.array([c["variants"][n]["joint_interior_ratio"] for c in allc]).mean(0)  # per joint: mean of all
+        jr = np.array([c["variants"][n]["joint_interior_ratio"] for c in allc]).mean(0)  # all round trips
         j = dict(zip(body.ARMS, jr))
         groups = [[v for k, v in j.items() if g in k] for g in ("Shoulder", "UpperArm", "LowerArm", "Hand")]
         jtxt = " / ".join(f"{min(g):.2f}-{max(g):.2f}" for g in groups)

@@ -85,7 +85,7 @@ def main(argv) -> int:
     ap.add_argument("--edge-frames", type=int, default=None,
                     help="override the config's edge padding (0 = the old end-only padding, for comparison)")
     ap.add_argument("--contact-tolerance", type=float, default=None,
-                    help="floor-contact tolerance of the round trips in cm (default: the API's; 0 = per frame)")
+                    help="floor-contact tolerance of the round trips, cm (default: the API's; 0 = per frame)")
     args = ap.parse_args(argv[1:])
     cfg, params = load_params(args.workdir, args.ae_step, transformer=not args.no_swap)
     if args.edge_frames is not None:

@@ -143,7 +143,8 @@ class TGSTModel:
         up = resample_body(upper, self.cfg.fps, content.fps, F)
         lo = resample_body(lower, self.cfg.fps, content.fps, F)
         tol = CONTACT_TOLERANCE if tolerance is None else tolerance
-        return content_floor_contact(body.body_to_motion(up, lo, content, floor=False), content, tolerance=tol)
+        written = body.body_to_motion(up, lo, content, floor=False)
+        return content_floor_contact(written, content, tolerance=tol)
 
     def transfer(self, content: Motion, style: Motion, method: str = "soft", name: Optional[str] = None) -> Motion:
         """``content`` performed in the style of ``style``, on the content's skeleton (module docstring)."""
@@ -190,7 +191,8 @@ def content_floor_contact(result: Motion, content: Motion, tolerance: float = CO
     the content's contact height (its foot joints' height above the floor when standing); only the root's
     vertical coordinate changes.
     References: Kuriyama et al. 2022, §3.1 (root position by forward kinematics from the feet). Difference
-    (``tolerance > 0``): the lowest foot is within ``tolerance`` of the content's on contact frames, not on it.
+    (``tolerance > 0``): the lowest foot is within ``tolerance`` of the content's on contact frames, not on
+    it.
     """
     feet = foot_names(content.skeleton)
     height = K.lowest_foot_height(content, feet)

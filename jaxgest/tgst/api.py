@@ -14,11 +14,12 @@ synthetic body), following §3.1 of the paper:
    cross-fade, both decoders) gives upper and lower exp-maps of the content's length;
 3. the result is resampled back to the content's frame times (quaternion slerp), written onto the content's
    skeleton with the content's root yaw and horizontal root path (:func:`jaxgest.motion.body.body_to_motion`),
-   and the root height is set so the lowest foot/toe joint is where the content's lowest foot/toe joint is
-   (:meth:`TGSTModel.to_motion`, :func:`content_floor_contact`): within 0.9 cm on the content's contact
-   frames, with the root's vertical shift of least total variation (SPEC §3.1 sets it exactly on every frame:
-   ``tolerance=0``); the result keeps the content's contact height (4.25 cm for the foot joints of a standing
-   Bandai-Namco actor, not 0) and leaves the floor when the content does.
+   and the root height is set per frame so the lowest foot/toe joint is where the content's lowest foot/toe
+   joint is on that frame (:meth:`TGSTModel.to_motion`, :func:`content_floor_contact`; paper §3.1, SPEC): the
+   result keeps the content's contact height (4.25 cm for the foot joints of a standing Bandai-Namco actor,
+   not 0) and leaves the floor when the content does. ``tolerance > 0`` (not the paper's; off by default)
+   keeps the lowest foot within that distance of the content's on its contact frames with the root's vertical
+   shift of least total variation instead, so that errors of the decoded legs do not move the whole body.
 
 The output has the content's skeleton, frame count and frame rate. Joints outside the 21-joint body (e.g.
 ZEGGS fingers) keep the content's rotations.
@@ -146,13 +147,15 @@ class TGSTModel:
         written = body.body_to_motion(up, lo, content, floor=False)
         return content_floor_contact(written, content, tolerance=tol)
 
-    def transfer(self, content: Motion, style: Motion, method: str = "soft", name: Optional[str] = None) -> Motion:
-        """``content`` performed in the style of ``style``, on the content's skeleton (module docstring)."""
+    def transfer(self, content: Motion, style: Motion, method: str = "soft", name: Optional[str] = None,
+                 tolerance: Optional[float] = None) -> Motion:
+        """``content`` performed in the style of ``style``, on the content's skeleton (module docstring);
+        ``tolerance``: the floor contact's (:meth:`to_motion`; default per frame)."""
         _check_method(method)
         cu = self.body_arrays(content, "content")
         su = self.body_arrays(style, "style")
         up, lo = self.transfer_body(cu, su, method)
-        out = self.to_motion(up, lo, content)
+        out = self.to_motion(up, lo, content, tolerance=tolerance)
         return out.replace(name=name or f"{content.name or 'content'} in the style of {style.name or 'style'}")
 
 
@@ -161,11 +164,11 @@ def foot_names(skeleton) -> list[str]:
     return body.rig_joints(skeleton, body.FEET)
 
 
-CONTACT_TOLERANCE = 0.9
-"""Default ``tolerance`` of :func:`content_floor_contact` (file units: cm on Bandai-Namco and ZEGGS): on the
-held-out Bandai-Namco round trips it removes 90 % of the arm speed the per-frame contact adds, keeping the
-lowest foot joint within 1 cm of the content's on every contact frame (experiments/tgst_bandai/README.md,
-section 2c). 0 = the per-frame contact of SPEC §3.1."""
+CONTACT_TOLERANCE = 0.0
+"""Default ``tolerance`` of :func:`content_floor_contact`: 0 = the per-frame contact of the paper (§3.1) and
+SPEC. A tolerance (file units: cm on Bandai-Namco and ZEGGS) is an option: 0.9 cm removes 90 % of the arm
+speed the per-frame contact adds on the held-out Bandai-Namco round trips, keeping the lowest foot joint
+within 1 cm of the content's on every contact frame (experiments/tgst_bandai/README.md, section 2c)."""
 CONTACT_BAND = 1.0
 """A content frame is a contact frame when its lowest foot/toe joint is within this of the clip's lowest."""
 

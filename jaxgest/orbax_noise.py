@@ -76,7 +76,9 @@ def _mute_enter() -> None:
         if _MUTE_DEPTH == 0:
             _MUTE_PREVIOUS = sys.unraisablehook
             sys.unraisablehook = _closed_loop_hook
-            logging.getLogger("asyncio").addFilter(_ORPHAN_FILTER)
+        # every time (addFilter is idempotent): the filter is present while any context is open even if
+        # someone removed it meanwhile
+        logging.getLogger("asyncio").addFilter(_ORPHAN_FILTER)
         _MUTE_DEPTH += 1
 
 

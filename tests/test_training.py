@@ -132,12 +132,14 @@ def test_checkpointer_has_no_process_wide_side_effects(tmp_path, monkeypatch):
     assert sys.unraisablehook == seen.append  # not clobbered on exit
 
 
-def test_orphan_tensorstore_task_records_are_dropped_only_while_muted(caplog):
+def test_orphan_tensorstore_task_records_are_dropped_only_while_muted(caplog, monkeypatch, request):
     """asyncio's "Task exception was never retrieved" of an abandoned tensorstore read (the noise of a damaged
     checkpoint: it surfaced at garbage collection in a `tgst transfer` process) is dropped while the filter is
     installed; an unrelated task's record still passes, and nothing is dropped after the context ends."""
     import asyncio
     import gc
+    import logging
+    import sys
 
     from jaxgest import orbax_noise
 
@@ -153,6 +155,15 @@ def test_orphan_tensorstore_task_records_are_dropped_only_while_muted(caplog):
         loop.close()
         gc.collect()
 
+    # start from no open context (an in-process `jaxgest.cli.main` of another test keeps one open for the
+    # process); the filter is put back afterwards if it was there
+    logger = logging.getLogger("asyncio")
+    was_there = orbax_noise._ORPHAN_FILTER in logger.filters
+    monkeypatch.setattr(orbax_noise, "_MUTE_DEPTH", 0)
+    monkeypatch.setattr(orbax_noise, "_MUTE_PREVIOUS", orbax_noise._MUTE_PREVIOUS)
+    monkeypatch.setattr(sys, "unraisablehook", sys.unraisablehook)
+    logger.removeFilter(orbax_noise._ORPHAN_FILTER)
+    request.addfinalizer(lambda: logger.addFilter(orbax_noise._ORPHAN_FILTER) if was_there else None)
     noise = "OUT_OF_RANGE: Error reading byte range [tensorstore_spec='{\"driver\":\"zarr\"}']"
     with caplog.at_level("ERROR", logger="asyncio"):
         with orbax_noise.closed_loop_errors_muted():

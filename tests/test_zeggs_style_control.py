@@ -112,22 +112,26 @@ def test_blend_moves_the_lean_monotonically_between_the_two_styles(styled):
 
 
 def test_pca_edit_moves_the_lean_in_the_sign_of_the_edit(styled):
-    """The PCA component that best separates the two styles' window embeddings: its sign relative to the
-    lean is fixed by the real windows (correlation); an edit of +2 std then moves the generated lean that
-    way against -2 std, and the embedding's coordinate by exactly 4 std."""
+    """The PCA component that best separates the two styles' window embeddings points from one style to the
+    other; the real clips fix which one leans more (sad: ~7 cm more than energetic), so an edit of +2 std
+    against -2 std must move the generated lean toward the style on the + side of the component, and the
+    embedding's coordinate by exactly 4 std. (The sign is taken from the style labels, not from the windows'
+    lean correlation, which mixes within-style variation: 0.48 on a model whose edit moves the lean 4 cm the
+    right way.)"""
     from jaxgest.zeggs.pca import fit_pca
 
-    model, audio, examples, _, clips = styled
+    model, audio, examples, real, clips = styled
     emb, leans, labels = windows(model, clips)
     pca = fit_pca(emb)
     pca.save(model.workdir / "pca.json")
     proj = pca.project(emb)
-    k = int(np.argmax([abs(np.corrcoef(proj[:, i], labels == "sad")[0, 1]) for i in range(3)]))
-    corr = np.corrcoef(proj[:, k], leans)[0, 1]
-    assert abs(corr) > 0.5, corr  # the component carries the style difference
+    seps = [np.corrcoef(proj[:, i], labels == "sad")[0, 1] for i in range(3)]
+    k = int(np.argmax(np.abs(seps)))
+    assert abs(seps[k]) > 0.5, seps  # the component separates the two styles' windows
+    direction = np.sign(seps[k]) * np.sign(real["sad"] - real["energetic"])  # + side leans more (sad) or less
     base = examples[0]
     e = model.style_embedding([base], temperature=0.0)
     moved = model.style_embedding([base], temperature=0.0, pca_edits={k: 2.0})
     assert pca.project(moved)[k] - pca.project(e)[k] == pytest.approx(2.0 * pca.std[k], rel=1e-4)
     up, down = (lean(_generate(model, audio, [base], pca_edits={k: d})) for d in (2.0, -2.0))
-    assert np.sign(up - down) == np.sign(corr) and abs(up - down) > 1.0, (up, down, corr, k)
+    assert np.sign(up - down) == direction and abs(up - down) > 1.0, (up, down, seps, k)

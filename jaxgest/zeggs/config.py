@@ -19,7 +19,7 @@ Presets (``preset(name)``; each is a :class:`Config` of three parts):
   65 frames, ~1.1 s of speech at 60 fps, the paper's "roughly 1 second"; with kernels 3, 15 the generator
   could not anticipate gestures that start up to ~0.9 s before their speech onset and its rollout was
   over-damped), D_S = 16; style encoder conv 64, D_e = 64 (the paper's; at 8k steps it beats D_e = 16 on
-  the Fréchet distance, the style probe and the held-out leakage contrast, one seed each), 2 heads; GRU 2 x 128, initializer 128; batch 16, training
+  the Fréchet distance and the held-out leakage contrast; its style probe varies with the seed), 2 heads; GRU 2 x 128, initializer 128; batch 16, training
   window T = 128 frames (the paper's code: 256; with T = 64 the rollout stayed over-damped: Fréchet distance
   7-14x the real-vs-real floor at 2,400 steps against ~1x with T = 128, two seeds each), style windows
   64-128 frames; RAdam 1e-3 (x0.995 every 100 steps); KL weight logistic (centre 1000

@@ -176,7 +176,11 @@ CONTACT_BAND = 1.0
 def content_contact_frames(content: Motion, band: float = CONTACT_BAND) -> np.ndarray:
     """``(F,)`` bools: the frames where ``content``'s lowest foot/toe joint is within ``band`` (file units)
     of its lowest height over the clip (standing or stepping, not in the air)."""
-    low = K.lowest_foot_height(content, foot_names(content.skeleton))
+    return _contact(K.lowest_foot_height(content, foot_names(content.skeleton)), band)
+
+
+def _contact(low: np.ndarray, band: float = CONTACT_BAND) -> np.ndarray:
+    """Contact frames of a lowest-foot height series (:func:`content_contact_frames`)."""
     return low < low.min() + band
 
 
@@ -202,7 +206,7 @@ def content_floor_contact(result: Motion, content: Motion, tolerance: float = CO
     if tolerance == 0:
         return K.floor_contact(result, feet=feet, height=height)
     return K.floor_contact_tube(result, feet=feet, height=height, tolerance=tolerance,
-                                contact=content_contact_frames(content))
+                                contact=_contact(height))  # content_contact_frames without a second FK
 
 
 def load_model(workdir) -> TGSTModel:

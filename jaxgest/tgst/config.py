@@ -214,6 +214,9 @@ class AutoencoderTrainConfig:
     # weight of the frame-to-frame difference term (autoencoder.expmap_velocity_loss) added to the training
     # loss (not in the paper); 0 = the paper's loss only
     velocity_weight: float = 0.0
+    # weight of the joint-displacement term (autoencoder.position_velocity_loss, cm per frame, forward kinematics
+    # of the canonical body) added to the training loss (not in the paper); 0 = off
+    position_velocity_weight: float = 0.0
     # weight of the squared frame-to-frame differences in the least-squares start of a lapped linear path
     # (``AutoencoderConfig.linear_context`` > 0; autoencoder.lapped_decoder_fit): larger = smoother start
     init_velocity_weight: float = 0.0

@@ -16,7 +16,8 @@ import jax.numpy as jnp
 
 from jaxgest.nn import safe_norm
 from jaxgest.tgst import model as M
-from jaxgest.tgst.autoencoder import expmap_reconstruction_loss, expmap_velocity_loss, mean_angular_error_deg
+from jaxgest.tgst.autoencoder import (expmap_reconstruction_loss, expmap_velocity_loss, mean_angular_error_deg,
+                                      position_velocity_loss)
 from jaxgest.tgst.config import ModelConfig, TransformerTrainConfig
 
 Params = M.Params
@@ -179,5 +180,7 @@ def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: ModelConfig) -> dict[s
         "upper_loss": expmap_reconstruction_loss(up_hat, upper),
         "lower_loss": expmap_reconstruction_loss(lo_hat, lower),
         "velocity_loss": expmap_velocity_loss(pred, target),  # frame-to-frame change (optional recipe term)
+        # frame-to-frame joint displacement, cm (optional recipe term)
+        "position_velocity_loss": position_velocity_loss(up_hat, lo_hat, upper, lower),
         "angle_deg": jax.lax.stop_gradient(mean_angular_error_deg(pred, target)),
     }

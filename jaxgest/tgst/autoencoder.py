@@ -323,6 +323,9 @@ def mean_angular_error_deg(pred: jax.Array, target: jax.Array) -> jax.Array:
     return jnp.degrees(jnp.mean(angular_error_rad(pred, target), axis=(1, 2)))
 
 
+POSITION_VELOCITY_JOINTS = ("all", "upper")
+
+
 def body_positions(upper: jax.Array, lower: jax.Array) -> jax.Array:
     """Joint positions ``(..., F, 21, 3)`` (cm) of the canonical body posed by body exp-maps.
 
@@ -341,18 +344,30 @@ def body_positions(upper: jax.Array, lower: jax.Array) -> jax.Array:
     return kinematics.fk_positions(rotations.expmap_to_quat(ex), offsets, tuple(int(p) for p in sk.parents))
 
 
-def position_velocity_loss(pred_upper: jax.Array, pred_lower: jax.Array, upper: jax.Array,
-                           lower: jax.Array) -> jax.Array:
-    """Mean over frame pairs and joints of ``||(p_hat[t+1] - p_hat[t]) - (p[t+1] - p[t])||_2`` (cm per frame)
-    with ``p`` the :func:`body_positions` of the decoded and of the input exp-maps. ``(batch,)``.
-
-    The reconstruction error of every joint's frame-to-frame displacement: unlike
-    :func:`expmap_velocity_loss` it weighs a joint's rotation by the lever arm it moves (a trunk joint moves
-    everything above it). Not in the paper: an optional recipe term
-    (``AutoencoderTrainConfig.position_velocity_weight``).
-    """
+def position_velocity_errors(pred_upper: jax.Array, pred_lower: jax.Array, upper: jax.Array,
+                             lower: jax.Array) -> jax.Array:
+    """``||(p_hat[t+1] - p_hat[t]) - (p[t+1] - p[t])||_2`` (cm per frame) per frame pair and joint,
+    ``(batch, F - 1, 21)`` in :func:`jaxgest.motion.body.body_skeleton` order, with ``p`` the
+    :func:`body_positions` of the decoded and of the input exp-maps."""
     chex.assert_equal_shape([pred_upper, upper])
     chex.assert_equal_shape([pred_lower, lower])
     dp = jnp.diff(body_positions(pred_upper, pred_lower), axis=-3)
     dt = jnp.diff(body_positions(upper, lower), axis=-3)
-    return jnp.mean(safe_norm(dp - dt), axis=(1, 2))
+    return safe_norm(dp - dt)
+
+
+def position_velocity_loss(errors: jax.Array, joints: str = "all") -> jax.Array:
+    """Mean over frame pairs and joints of :func:`position_velocity_errors` ``(batch, F - 1, 21)``: the
+    reconstruction error of every joint's frame-to-frame displacement (cm per frame). ``(batch,)``.
+    ``joints``: ``"all"`` 21 joints, ``"upper"`` the 13 upper-body joints (the legs' displacements left out).
+
+    Unlike :func:`expmap_velocity_loss` it weighs a joint's rotation by the lever arm it moves (a trunk
+    joint moves everything above it). Not in the paper: an optional recipe term
+    (``AutoencoderTrainConfig.position_velocity_weight`` and ``position_velocity_joints``).
+    """
+    if joints not in POSITION_VELOCITY_JOINTS:
+        raise ValueError(f"joints must be one of {POSITION_VELOCITY_JOINTS}, got {joints!r}")
+    if joints == "upper":
+        names = body.body_skeleton().names
+        errors = errors[..., np.array([names.index(n) for n in body.UPPER])]
+    return jnp.mean(errors, axis=(1, 2))

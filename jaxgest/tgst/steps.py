@@ -62,7 +62,8 @@ def make_ae_train_step(cfg: Config, tx: optax.GradientTransformation) -> Step:
         if t.velocity_weight:
             loss = loss + t.velocity_weight * metrics["velocity_loss"]
         if t.position_velocity_weight:
-            loss = loss + t.position_velocity_weight * metrics["position_velocity_loss"]
+            term = "position_velocity_loss" if t.position_velocity_joints == "all" else "upper_position_velocity_loss"
+            loss = loss + t.position_velocity_weight * metrics[term]
         return loss, metrics
 
     return make_update_step(loss_fn)

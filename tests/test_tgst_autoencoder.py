@@ -58,7 +58,8 @@ def test_ae_loss_decreases(params):
     state, first = step(state, batch, key)
     for _ in range(29):
         state, metrics = step(state, batch, key)
-    assert set(metrics) == {"loss", "upper_loss", "lower_loss", "velocity_loss", "angle_deg"}
+    assert set(metrics) == {"loss", "upper_loss", "lower_loss", "velocity_loss", "position_velocity_loss",
+                            "upper_position_velocity_loss", "angle_deg"}
     assert float(metrics["loss"]) < 0.8 * float(first["loss"])
     assert float(metrics["angle_deg"]) < float(first["angle_deg"])
     assert int(state.step) == 30
@@ -188,3 +189,103 @@ def test_linear_path_and_latent_activation_change_the_model_as_stated():
         p = random_params()["autoencoder"]
         z = MotionAutoencoder(cfg.autoencoder).apply({"params": p}, x, method=MotionAutoencoder.encode)
         assert bool((np.asarray(z) < -0.2).any()) == can_go_low
+
+
+# ----- the joint-displacement recipe term (train.autoencoder.position_velocity_weight) ----------------------
+
+def _body_motion(upper, lower):
+    """The canonical body posed by body exp-maps through the Motion/numpy FK path, joints looked up by name,
+    Hips at the origin: an independent route to :func:`autoencoder.body_positions`."""
+    from jaxgest.motion import body
+    from jaxgest.motion import kinematics as K
+    from jaxgest.motion import rotations as R
+    from jaxgest.motion.skeleton import Motion
+
+    sk = body.body_skeleton()
+    f = upper.shape[0]
+    ex = {n: v for n, v in zip(body.UPPER, upper.reshape(f, -1, 3).transpose(1, 0, 2))}
+    ex.update({n: v for n, v in zip(body.LOWER, lower.reshape(f, -1, 3).transpose(1, 0, 2))})
+    rots = np.stack([R.expmap_to_quat(ex[n].astype(np.float64)) for n in sk.names], axis=1)
+    trans = np.broadcast_to(sk.offsets, (f,) + sk.offsets.shape).copy()
+    trans[:, sk.names.index("Hips")] = 0.0
+    return K.forward_kinematics(Motion(sk, rots, trans, fps=30.0))
+
+
+def test_body_positions_are_forward_kinematics_of_the_body_with_the_hips_at_the_origin():
+    from jaxgest.tgst.autoencoder import body_positions
+
+    rng = np.random.default_rng(3)
+    upper, lower = rng.normal(0, 0.6, (5, 39)), rng.normal(0, 0.6, (5, 24))
+    got = np.asarray(body_positions(jnp.asarray(upper, jnp.float32), jnp.asarray(lower, jnp.float32)))
+    np.testing.assert_allclose(got, _body_motion(upper, lower), atol=1e-3)  # cm, float32
+    from jaxgest.motion import body
+
+    sk = body.body_skeleton()
+    par = np.asarray(sk.parents)
+    assert np.abs(got[:, par < 0]).max() == 0  # the Hips at the origin
+    bones = np.linalg.norm(got[:, par >= 0] - got[:, par[par >= 0]], axis=-1)
+    np.testing.assert_allclose(bones, np.broadcast_to(np.linalg.norm(sk.offsets[par >= 0], axis=-1), bones.shape),
+                               rtol=1e-4)  # bone lengths of the body
+
+
+def test_position_velocity_loss_zeros_and_lever_arms():
+    from jaxgest.motion import body
+    from jaxgest.tgst.autoencoder import expmap_velocity_loss, position_velocity_errors, position_velocity_loss
+
+    def pvl(pu, pl, u, l, joints="all"):
+        return position_velocity_loss(position_velocity_errors(pu, pl, u, l), joints)
+
+    rng = np.random.default_rng(4)
+    upper = jnp.asarray(np.cumsum(rng.normal(0, 0.05, (2, 12, 39)), axis=1) + rng.normal(0, 0.4, (2, 1, 39)),
+                        jnp.float32)
+    lower = jnp.asarray(rng.normal(0, 0.4, (2, 12, 24)), jnp.float32)
+    assert np.all(np.asarray(pvl(upper, lower, upper, lower)) == 0)
+    # a joint without child joints (hands, head, toes): its rotation moves no joint position
+    hand = 3 * body.UPPER.index("Hand_L")
+    moved = upper.at[..., hand:hand + 3].add(jnp.asarray(rng.normal(0, 0.5, (2, 12, 3)), jnp.float32))
+    np.testing.assert_allclose(np.asarray(pvl(moved, lower, upper, lower)), 0, atol=1e-4)
+    assert np.all(np.asarray(expmap_velocity_loss(moved, upper)) > 0.02)  # the exp-map term does see it
+    # the same jitter on the spine costs more than on a forearm (longer lever arm: everything above it)
+    jitter = jnp.asarray(rng.normal(0, 0.02, (2, 12, 3)), jnp.float32)
+    costs = {}
+    for joint in ("Spine", "LowerArm_L"):
+        j = 3 * body.UPPER.index(joint)
+        costs[joint] = np.asarray(pvl(upper.at[..., j:j + 3].add(jitter), lower, upper, lower))
+    assert np.all(costs["Spine"] > 2 * costs["LowerArm_L"])
+    # "upper": the legs' displacements left out (a leg change costs nothing there, something with "all")
+    knee = 3 * body.LOWER.index("UpperLeg_L")
+    legs = lower.at[..., knee:knee + 3].add(jnp.asarray(rng.normal(0, 0.3, (2, 12, 3)), jnp.float32))
+    assert np.all(np.asarray(pvl(upper, legs, upper, lower, "upper")) == 0)
+    assert np.all(np.asarray(pvl(upper, legs, upper, lower, "all")) > 0.1)
+    # the upper mean is the mean over the 13 upper joints: 21/13 x the all-joint mean of an upper-only change
+    spine = upper.at[..., 3:6].add(jitter)
+    np.testing.assert_allclose(np.asarray(pvl(spine, lower, upper, lower, "upper")),
+                               21 / 13 * np.asarray(pvl(spine, lower, upper, lower, "all")), rtol=1e-5)
+    with pytest.raises(ValueError, match="joints must be one of"):
+        pvl(upper, lower, upper, lower, "arms")
+
+
+@pytest.mark.parametrize("weights", [(0.0, 0.0, "all"), (0.0, 0.5, "all"), (3.0, 0.5, "upper")])
+def test_ae_step_minimises_the_stated_objective(params, weights):
+    """One plain gradient step (SGD, lr 1) moves the parameters by minus the gradient of loss +
+    velocity_weight x velocity_loss + position_velocity_weight x the position term of the chosen joints."""
+    from jaxgest.tgst.losses import ae_loss_terms
+
+    vw, pw, joints = weights
+    ae_train = dataclasses.replace(FULL.train.autoencoder, velocity_weight=vw, position_velocity_weight=pw,
+                                   position_velocity_joints=joints)
+    cfg = dataclasses.replace(FULL, train=dataclasses.replace(FULL.train, autoencoder=ae_train))
+    p0 = params["autoencoder"]
+    batch = {"upper": smooth_motion(12, 2, 32, 39), "lower": smooth_motion(13, 2, 32, 24)}
+
+    def objective(p):
+        t = {k: jnp.mean(v) for k, v in ae_loss_terms(p, batch, cfg=cfg.model).items()}
+        pos = t["position_velocity_loss"] if joints == "all" else t["upper_position_velocity_loss"]
+        return t["loss"] + vw * t["velocity_loss"] + pw * pos
+
+    expected = jax.tree_util.tree_map(lambda a, g: a - g, p0, jax.grad(objective)(p0))
+    tx = optax.sgd(1.0)
+    state = create_ae_state(cfg, jax.tree_util.tree_map(jnp.copy, p0), tx)
+    state, _ = jax.jit(make_ae_train_step(cfg, tx))(state, batch, jax.random.key(0))
+    for a, b in zip(jax.tree_util.tree_leaves(state.params), jax.tree_util.tree_leaves(expected)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-4, atol=1e-6)

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.motion import rotations
+from jaxgest.motion import body, kinematics, rotations
 from jaxgest.nn import gelu_exact, safe_norm
 from jaxgest.tgst.config import AutoencoderConfig
 
@@ -321,3 +321,53 @@ def mean_angular_error_deg(pred: jax.Array, target: jax.Array) -> jax.Array:
     References: Kuriyama et al. 2022, §3.5 (the authors' ``evaluation`` reports this angle).
     """
     return jnp.degrees(jnp.mean(angular_error_rad(pred, target), axis=(1, 2)))
+
+
+POSITION_VELOCITY_JOINTS = ("all", "upper")
+
+
+def body_positions(upper: jax.Array, lower: jax.Array) -> jax.Array:
+    """Joint positions ``(..., F, 21, 3)`` (cm) of the canonical body posed by body exp-maps.
+
+    upper ``(..., F, 39)``, lower ``(..., F, 24)`` (:data:`jaxgest.motion.body.UPPER` then ``LOWER``
+    joints, Hips yaw already removed, as :func:`jaxgest.motion.body.motion_to_body` writes them) on
+    :func:`jaxgest.motion.body.body_skeleton`'s bones; the Hips at the origin with its (yaw-free) rotation
+    kept, i.e. world positions up to the root's path and heading, which the content supplies at transfer.
+    """
+    sk = body.body_skeleton()
+    order = np.array([body.BODY.index(n) for n in sk.names])
+    ex = jnp.concatenate([upper, lower], axis=-1)
+    ex = ex.reshape(ex.shape[:-1] + (len(body.BODY), 3))[..., order, :]
+    offsets = np.array(sk.offsets, np.float32)
+    offsets[np.asarray(sk.parents) < 0] = 0.0  # the root at the origin
+    offsets = jnp.broadcast_to(jnp.asarray(offsets, ex.dtype), ex.shape)
+    return kinematics.fk_positions(rotations.expmap_to_quat(ex), offsets, tuple(int(p) for p in sk.parents))
+
+
+def position_velocity_errors(pred_upper: jax.Array, pred_lower: jax.Array, upper: jax.Array,
+                             lower: jax.Array) -> jax.Array:
+    """``||(p_hat[t+1] - p_hat[t]) - (p[t+1] - p[t])||_2`` (cm per frame) per frame pair and joint,
+    ``(batch, F - 1, 21)`` in :func:`jaxgest.motion.body.body_skeleton` order, with ``p`` the
+    :func:`body_positions` of the decoded and of the input exp-maps."""
+    chex.assert_equal_shape([pred_upper, upper])
+    chex.assert_equal_shape([pred_lower, lower])
+    dp = jnp.diff(body_positions(pred_upper, pred_lower), axis=-3)
+    dt = jnp.diff(body_positions(upper, lower), axis=-3)
+    return safe_norm(dp - dt)
+
+
+def position_velocity_loss(errors: jax.Array, joints: str = "all") -> jax.Array:
+    """Mean over frame pairs and joints of :func:`position_velocity_errors` ``(batch, F - 1, 21)``: the
+    reconstruction error of every joint's frame-to-frame displacement (cm per frame). ``(batch,)``.
+    ``joints``: ``"all"`` 21 joints, ``"upper"`` the 13 upper-body joints (the legs' displacements left out).
+
+    Unlike :func:`expmap_velocity_loss` it weighs a joint's rotation by the lever arm it moves (a trunk
+    joint moves everything above it). Not in the paper: an optional recipe term
+    (``AutoencoderTrainConfig.position_velocity_weight`` and ``position_velocity_joints``).
+    """
+    if joints not in POSITION_VELOCITY_JOINTS:
+        raise ValueError(f"joints must be one of {POSITION_VELOCITY_JOINTS}, got {joints!r}")
+    if joints == "upper":
+        names = body.body_skeleton().names
+        errors = errors[..., np.array([names.index(n) for n in body.UPPER])]
+    return jnp.mean(errors, axis=(1, 2))

@@ -214,13 +214,18 @@ class AutoencoderTrainConfig:
     # weight of the frame-to-frame difference term (autoencoder.expmap_velocity_loss) added to the training
     # loss (not in the paper); 0 = the paper's loss only
     velocity_weight: float = 0.0
+    # weight of the joint-displacement term (autoencoder.position_velocity_loss, cm per frame, forward kinematics
+    # of the canonical body) added to the training loss (not in the paper); 0 = off
+    position_velocity_weight: float = 0.0
+    position_velocity_joints: str = "all"  # joints of that term: "all" 21, "upper" the 13 upper-body joints
     # weight of the squared frame-to-frame differences in the least-squares start of a lapped linear path
     # (``AutoencoderConfig.linear_context`` > 0; autoencoder.lapped_decoder_fit): larger = smoother start
     init_velocity_weight: float = 0.0
 
     def __post_init__(self):
         for name, value, allowed in (("lr_schedule", self.lr_schedule, AE_LR_SCHEDULES),
-                                     ("sampling", self.sampling, AE_SAMPLINGS)):
+                                     ("sampling", self.sampling, AE_SAMPLINGS),
+                                     ("position_velocity_joints", self.position_velocity_joints, ("all", "upper"))):
             if value not in allowed:
                 raise ValueError(f"train.autoencoder.{name} must be one of {allowed}, got {value!r}")
 

@@ -16,7 +16,8 @@ import jax.numpy as jnp
 
 from jaxgest.nn import safe_norm
 from jaxgest.tgst import model as M
-from jaxgest.tgst.autoencoder import expmap_reconstruction_loss, expmap_velocity_loss, mean_angular_error_deg
+from jaxgest.tgst.autoencoder import (expmap_reconstruction_loss, expmap_velocity_loss, mean_angular_error_deg,
+                                      position_velocity_errors, position_velocity_loss)
 from jaxgest.tgst.config import ModelConfig, TransformerTrainConfig
 
 Params = M.Params
@@ -174,10 +175,14 @@ def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: ModelConfig) -> dict[s
         up_hat, lo_hat = up_hat[:, :f], lo_hat[:, :f]
     pred = jnp.concatenate([up_hat, lo_hat], axis=-1)
     target = jnp.concatenate([upper, lower], axis=-1)
+    pv_errors = position_velocity_errors(up_hat, lo_hat, upper, lower)
     return {
         "loss": expmap_reconstruction_loss(pred, target),
         "upper_loss": expmap_reconstruction_loss(up_hat, upper),
         "lower_loss": expmap_reconstruction_loss(lo_hat, lower),
         "velocity_loss": expmap_velocity_loss(pred, target),  # frame-to-frame change (optional recipe term)
+        # frame-to-frame joint displacement, cm (optional recipe term)
+        "position_velocity_loss": position_velocity_loss(pv_errors),
+        "upper_position_velocity_loss": position_velocity_loss(pv_errors, "upper"),
         "angle_deg": jax.lax.stop_gradient(mean_angular_error_deg(pred, target)),
     }

@@ -48,7 +48,8 @@ def create_transformer_state(cfg: Config, tr_params: Params,
 
 def make_ae_train_step(cfg: Config, tx: optax.GradientTransformation) -> Step:
     """Adam step on the mean exp-map reconstruction loss (§3.5), plus ``train.autoencoder.velocity_weight`` times
-    the frame-to-frame difference term when it is set (not in the paper); batch ``{"upper", "lower"}``."""
+    the exp-map frame-to-frame difference term and ``train.autoencoder.position_velocity_weight`` times the
+    joint-displacement term when they are set (not in the paper); batch ``{"upper", "lower"}``."""
 
     del tx  # the state's own optimiser applies the update
 
@@ -56,8 +57,14 @@ def make_ae_train_step(cfg: Config, tx: optax.GradientTransformation) -> Step:
         del key, step  # deterministic model (no dropout), constant loss weights
         terms = ae_loss_terms(params, batch, cfg=cfg.model)
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
-        w = cfg.train.autoencoder.velocity_weight  # optional recipe term (not in the paper)
-        return (metrics["loss"] + w * metrics["velocity_loss"] if w else metrics["loss"]), metrics
+        t = cfg.train.autoencoder  # optional recipe terms (not in the paper)
+        loss = metrics["loss"]
+        if t.velocity_weight:
+            loss = loss + t.velocity_weight * metrics["velocity_loss"]
+        if t.position_velocity_weight:
+            term = "position_velocity_loss" if t.position_velocity_joints == "all" else "upper_position_velocity_loss"
+            loss = loss + t.position_velocity_weight * metrics[term]
+        return loss, metrics
 
     return make_update_step(loss_fn)
 

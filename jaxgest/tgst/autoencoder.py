@@ -16,7 +16,7 @@ import numpy as np
 
 from jaxgest.motion import body, kinematics, rotations
 from jaxgest.nn import gelu_exact, safe_norm
-from jaxgest.tgst.config import AutoencoderConfig
+from jaxgest.tgst.config import POSITION_VELOCITY_JOINTS, AutoencoderConfig
 
 
 def _pytorch_padding(kernel: int) -> tuple[tuple[int, int]]:
@@ -321,9 +321,6 @@ def mean_angular_error_deg(pred: jax.Array, target: jax.Array) -> jax.Array:
     References: Kuriyama et al. 2022, §3.5 (the authors' ``evaluation`` reports this angle).
     """
     return jnp.degrees(jnp.mean(angular_error_rad(pred, target), axis=(1, 2)))
-
-
-POSITION_VELOCITY_JOINTS = ("all", "upper")
 
 
 def body_positions(upper: jax.Array, lower: jax.Array) -> jax.Array:

@@ -71,6 +71,7 @@ TOKEN_POSITIONS = ("index", "none")
 SWAP_SIMILARITIES = ("dot", "scaled")
 AE_LR_SCHEDULES = ("constant", "cosine")
 AE_SAMPLINGS = ("windows", "content")
+POSITION_VELOCITY_JOINTS = ("all", "upper")  # joints of the optional joint-displacement term
 TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
 PRESETS = ("tiny", "paper", "fit", "fit-pca", "fit-smooth")  # names accepted by preset()
 METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
@@ -225,7 +226,7 @@ class AutoencoderTrainConfig:
     def __post_init__(self):
         for name, value, allowed in (("lr_schedule", self.lr_schedule, AE_LR_SCHEDULES),
                                      ("sampling", self.sampling, AE_SAMPLINGS),
-                                     ("position_velocity_joints", self.position_velocity_joints, ("all", "upper"))):
+                                     ("position_velocity_joints", self.position_velocity_joints, POSITION_VELOCITY_JOINTS)):
             if value not in allowed:
                 raise ValueError(f"train.autoencoder.{name} must be one of {allowed}, got {value!r}")
 

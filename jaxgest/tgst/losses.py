@@ -156,8 +156,13 @@ def transformer_loss_terms(tr_params: Params, content_tokens: jax.Array, style_t
     return terms
 
 
-def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: ModelConfig) -> dict[str, jax.Array]:
+def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: ModelConfig,
+                  position_terms: bool = True) -> dict[str, jax.Array]:
     """Per-example autoencoder losses ``(batch,)``: ``loss`` over all 21 joints, upper/lower parts, degrees.
+
+    ``position_terms``: also the joint-displacement terms (``position_velocity_loss`` and its upper-body
+    version; forward kinematics of the decoded and the input poses, about a third of a training step's time),
+    which the training step asks for only when ``train.autoencoder.position_velocity_weight`` is set.
 
     batch: ``{"upper": (B, F, 39), "lower": (B, F, 24)}`` with F a multiple of 4 (the encoder's stride).
     Each window goes through the same clip-end handling as a whole clip at transfer time
@@ -175,14 +180,15 @@ def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: ModelConfig) -> dict[s
         up_hat, lo_hat = up_hat[:, :f], lo_hat[:, :f]
     pred = jnp.concatenate([up_hat, lo_hat], axis=-1)
     target = jnp.concatenate([upper, lower], axis=-1)
-    pv_errors = position_velocity_errors(up_hat, lo_hat, upper, lower)
-    return {
+    terms = {
         "loss": expmap_reconstruction_loss(pred, target),
         "upper_loss": expmap_reconstruction_loss(up_hat, upper),
         "lower_loss": expmap_reconstruction_loss(lo_hat, lower),
         "velocity_loss": expmap_velocity_loss(pred, target),  # frame-to-frame change (optional recipe term)
-        # frame-to-frame joint displacement, cm (optional recipe term)
-        "position_velocity_loss": position_velocity_loss(pv_errors),
-        "upper_position_velocity_loss": position_velocity_loss(pv_errors, "upper"),
         "angle_deg": jax.lax.stop_gradient(mean_angular_error_deg(pred, target)),
     }
+    if position_terms:  # frame-to-frame joint displacement, cm (optional recipe term)
+        pv_errors = position_velocity_errors(up_hat, lo_hat, upper, lower)
+        terms["position_velocity_loss"] = position_velocity_loss(pv_errors)
+        terms["upper_position_velocity_loss"] = position_velocity_loss(pv_errors, "upper")
+    return terms

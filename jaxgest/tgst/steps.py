@@ -55,9 +55,9 @@ def make_ae_train_step(cfg: Config, tx: optax.GradientTransformation) -> Step:
 
     def loss_fn(params, batch, key, step):
         del key, step  # deterministic model (no dropout), constant loss weights
-        terms = ae_loss_terms(params, batch, cfg=cfg.model)
-        metrics = {k: jnp.mean(v) for k, v in terms.items()}
         t = cfg.train.autoencoder  # optional recipe terms (not in the paper)
+        terms = ae_loss_terms(params, batch, cfg=cfg.model, position_terms=bool(t.position_velocity_weight))
+        metrics = {k: jnp.mean(v) for k, v in terms.items()}
         loss = metrics["loss"]
         if t.velocity_weight:
             loss = loss + t.velocity_weight * metrics["velocity_loss"]

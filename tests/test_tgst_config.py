@@ -93,6 +93,16 @@ def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
     assert apply_overrides(TINY, None) == TINY
     with pytest.raises(JaxgestError, match="override"):
         apply_overrides(TINY, {"swap_similarity": "cosine"})
+    with pytest.raises(JaxgestError, match="no field 'widht'"):
+        apply_overrides(TINY, {"train.autoencoder.widht": 3})
+    with pytest.raises(JaxgestError, match="is a section"):
+        apply_overrides(TINY, {"model.autoencoder": 3})
+    # fields that must agree are changed together and checked once: a wider latent and its token width
+    wide = apply_overrides(preset("fit"), {"model.autoencoder.encoder_channels": (64, 32, 32),
+                                           "model.transformer.token_dim": 128})
+    assert wide.model.autoencoder.latent_dim == 32 and wide.model.transformer.token_dim == 128
+    with pytest.raises(JaxgestError, match="token_dim"):
+        apply_overrides(preset("fit"), {"model.autoencoder.encoder_channels": (64, 32, 32)})
 
 
 def test_checkpoints_check_only_the_model_config(tmp_path):

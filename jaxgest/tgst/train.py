@@ -84,22 +84,33 @@ def _override_path(key: str) -> tuple[str, ...]:
     return parts
 
 
-def _replace_path(obj, path: tuple[str, ...], value):
+def _set_path(d: dict, path: tuple[str, ...], value, where: str = "Config") -> None:
+    """Set ``d[path[0]]...[path[-1]] = value`` in a config's dict form; unknown names raise ``TypeError``."""
+    if path[0] not in d:
+        raise TypeError(f"{where} has no field {path[0]!r}")
     if len(path) == 1:
-        return dataclasses.replace(obj, **{path[0]: value})
-    if not dataclasses.is_dataclass(getattr(obj, path[0], None)):
-        raise TypeError(f"{type(obj).__name__} has no section {path[0]!r}")
-    return dataclasses.replace(obj, **{path[0]: _replace_path(getattr(obj, path[0]), path[1:], value)})
+        if isinstance(d[path[0]], dict):
+            raise TypeError(f"{where}.{path[0]} is a section; set its fields")
+        d[path[0]] = value
+        return
+    if not isinstance(d[path[0]], dict):
+        raise TypeError(f"{where} has no section {path[0]!r}")
+    _set_path(d[path[0]], path[1:], value, f"{where}.{path[0]}")
 
 
 def apply_overrides(cfg: Config, overrides: Optional[dict] = None) -> Config:
     """``cfg`` with fields replaced by dotted paths: ``{"model.swap_similarity": "scaled",
     "model.transformer.token_positions": "none", "train.autoencoder.mirror": False}`` (the flat names of
     older versions are accepted too, see :func:`_override_path`); for experiments and ablations."""
-    try:
-        for key, value in (overrides or {}).items():
-            cfg = _replace_path(cfg, _override_path(key), value)
+    if not overrides:
         return cfg
+    # all fields set first, then checked once: fields that must agree (the latent width and the token
+    # width, say) can be changed together
+    d = cfg.to_dict()
+    try:
+        for key, value in overrides.items():
+            _set_path(d, _override_path(key), value)
+        return type(cfg).from_dict(d)
     except (TypeError, ValueError) as e:
         raise JaxgestError(f"bad TGST config override: {e}") from None
 

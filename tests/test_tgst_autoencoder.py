@@ -265,28 +265,42 @@ def test_position_velocity_loss_zeros_and_lever_arms():
         pvl(upper, lower, upper, lower, "arms")
 
 
-@pytest.mark.parametrize("weights", [(0.0, 0.0, "all"), (0.0, 0.5, "all"), (3.0, 0.5, "upper")])
+@pytest.mark.parametrize("weights", [(0.0, 0.0, "all", 1.0), (0.0, 0.5, "all", 1.0), (3.0, 0.5, "upper", 1.0),
+                                     (2.0, 0.0, "all", 4.0)])
 def test_ae_step_minimises_the_stated_objective(params, weights):
     """One plain gradient step (SGD, lr 1) moves the parameters by minus the gradient of loss +
-    velocity_weight x velocity_loss + position_velocity_weight x the position term of the chosen joints."""
+    velocity_weight x velocity_loss + position_velocity_weight x the position term of the chosen joints, with
+    the trunk joints' exp-map errors counted trunk_weight times in the first two (written out per joint here)."""
+    from jaxgest.tgst import model as M
     from jaxgest.tgst.losses import ae_loss_terms
 
-    vw, pw, joints = weights
+    vw, pw, joints, tw = weights
     ae_train = dataclasses.replace(FULL.train.autoencoder, velocity_weight=vw, position_velocity_weight=pw,
-                                   position_velocity_joints=joints)
+                                   position_velocity_joints=joints, trunk_weight=tw)
     cfg = dataclasses.replace(FULL, train=dataclasses.replace(FULL.train, autoencoder=ae_train))
     p0 = params["autoencoder"]
     batch = {"upper": smooth_motion(12, 2, 32, 39), "lower": smooth_motion(13, 2, 32, 24)}
+    w = np.ones(21, np.float32)
+    w[:3] = tw  # Hips, Spine, Chest: the first three upper-body joints
+
+    def per_joint(pred, target):  # mean over batch and frames of ||r_hat - r|| per joint, (21,)
+        d = (pred - target).reshape(pred.shape[:2] + (21, 3))
+        return jnp.mean(jnp.sqrt(jnp.sum(d * d, axis=-1) + 1e-12), axis=(0, 1))
 
     def objective(p):
         t = {k: jnp.mean(v) for k, v in ae_loss_terms(p, batch, cfg=cfg.model).items()}
         pos = t["position_velocity_loss"] if joints == "all" else t["upper_position_velocity_loss"]
-        return t["loss"] + vw * t["velocity_loss"] + pw * pos
+        pred = jnp.concatenate(M.reconstruct(p, batch["upper"], cfg=cfg.model), axis=-1)
+        target = jnp.concatenate([batch["upper"], batch["lower"]], axis=-1)
+        rec = jnp.sum(w * per_joint(pred, target)) / 21
+        vel = jnp.sum(w * per_joint(jnp.diff(pred, axis=1), jnp.diff(target, axis=1))) / 21
+        return rec + vw * vel + pw * pos
 
     expected = jax.tree_util.tree_map(lambda a, g: a - g, p0, jax.grad(objective)(p0))
     tx = optax.sgd(1.0)
     state = create_ae_state(cfg, jax.tree_util.tree_map(jnp.copy, p0), tx)
     state, metrics = jax.jit(make_ae_train_step(cfg, tx))(state, batch, jax.random.key(0))
     assert ("position_velocity_loss" in metrics) == (pw > 0)  # computed (and logged) only when weighted
+    assert ("trunk_loss" in metrics) == (tw != 1.0)
     for a, b in zip(jax.tree_util.tree_leaves(state.params), jax.tree_util.tree_leaves(expected)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-4, atol=1e-6)

@@ -95,6 +95,8 @@ def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
         apply_overrides(TINY, {"swap_similarity": "cosine"})
     with pytest.raises(JaxgestError, match="no field 'widht'"):
         apply_overrides(TINY, {"train.autoencoder.widht": 3})
+    with pytest.raises(JaxgestError, match="trunk_weight must be >= 1"):
+        apply_overrides(TINY, {"train.autoencoder.trunk_weight": 0.5})
     with pytest.raises(JaxgestError, match="is a section"):
         apply_overrides(TINY, {"model.autoencoder": 3})
     # fields that must agree are changed together and checked once: a wider latent and its token width

@@ -305,6 +305,15 @@ def expmap_velocity_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
     return expmap_reconstruction_loss(jnp.diff(pred, axis=1), jnp.diff(target, axis=1))
 
 
+#: the trunk joints of ``train.autoencoder.trunk_weight`` (:func:`trunk_channels`)
+TRUNK_JOINTS = ("Hips", "Spine", "Chest")
+
+
+def trunk_channels() -> np.ndarray:
+    """Exp-map channels of :data:`TRUNK_JOINTS` in the upper-body layout (:data:`jaxgest.motion.body.UPPER`)."""
+    return np.concatenate([np.arange(3 * i, 3 * i + 3) for i in (body.UPPER.index(j) for j in TRUNK_JOINTS)])
+
+
 def angular_error_rad(pred: jax.Array, target: jax.Array) -> jax.Array:
     """Geodesic angle between the rotations of two exp-map arrays ``(..., 3J) -> (..., J)`` in [0, pi]."""
     chex.assert_equal_shape([pred, target])

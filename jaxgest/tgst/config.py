@@ -219,6 +219,10 @@ class AutoencoderTrainConfig:
     # of the canonical body) added to the training loss (not in the paper); 0 = off
     position_velocity_weight: float = 0.0
     position_velocity_joints: str = "all"  # joints of that term: "all" 21, "upper" the 13 upper-body joints
+    # extra weight of the trunk joints (autoencoder.TRUNK_JOINTS: Hips, Spine, Chest; their rotations move
+    # everything above them) in the reconstruction term and, with velocity_weight, in the frame-to-frame
+    # term (not in the paper): the loss adds (trunk_weight - 1) x the trunk-only terms; 1 = off
+    trunk_weight: float = 1.0
     # weight of the squared frame-to-frame differences in the least-squares start of a lapped linear path
     # (``AutoencoderConfig.linear_context`` > 0; autoencoder.lapped_decoder_fit): larger = smoother start
     init_velocity_weight: float = 0.0
@@ -229,6 +233,8 @@ class AutoencoderTrainConfig:
                                      ("position_velocity_joints", self.position_velocity_joints, POSITION_VELOCITY_JOINTS)):
             if value not in allowed:
                 raise ValueError(f"train.autoencoder.{name} must be one of {allowed}, got {value!r}")
+        if not self.trunk_weight >= 1.0:
+            raise ValueError(f"train.autoencoder.trunk_weight must be >= 1 (1 = off), got {self.trunk_weight}")
 
 
 @dataclasses.dataclass(frozen=True)

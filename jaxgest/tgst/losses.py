@@ -17,7 +17,8 @@ import jax.numpy as jnp
 from jaxgest.nn import safe_norm
 from jaxgest.tgst import model as M
 from jaxgest.tgst.autoencoder import (expmap_reconstruction_loss, expmap_velocity_loss, mean_angular_error_deg,
-                                      position_velocity_errors, position_velocity_loss)
+                                      position_velocity_errors, position_velocity_loss,
+                                      trunk_channels)
 from jaxgest.tgst.config import ModelConfig, TransformerTrainConfig
 
 Params = M.Params
@@ -157,12 +158,14 @@ def transformer_loss_terms(tr_params: Params, content_tokens: jax.Array, style_t
 
 
 def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: ModelConfig,
-                  position_terms: bool = True) -> dict[str, jax.Array]:
+                  position_terms: bool = True, trunk_terms: bool = False) -> dict[str, jax.Array]:
     """Per-example autoencoder losses ``(batch,)``: ``loss`` over all 21 joints, upper/lower parts, degrees.
 
     ``position_terms``: also the joint-displacement terms (``position_velocity_loss`` and its upper-body
     version; forward kinematics of the decoded and the input poses, about a third of a training step's time),
     which the training step asks for only when ``train.autoencoder.position_velocity_weight`` is set.
+    ``trunk_terms``: also the reconstruction and frame-to-frame terms of the trunk joints alone
+    (``TRUNK_JOINTS``), for ``train.autoencoder.trunk_weight``.
 
     batch: ``{"upper": (B, F, 39), "lower": (B, F, 24)}`` with F a multiple of 4 (the encoder's stride).
     Each window goes through the same clip-end handling as a whole clip at transfer time
@@ -187,6 +190,10 @@ def ae_loss_terms(ae_params: Params, batch: dict, *, cfg: ModelConfig,
         "velocity_loss": expmap_velocity_loss(pred, target),  # frame-to-frame change (optional recipe term)
         "angle_deg": jax.lax.stop_gradient(mean_angular_error_deg(pred, target)),
     }
+    if trunk_terms:  # the trunk's rotations alone (optional recipe term)
+        ch = trunk_channels()
+        terms["trunk_loss"] = expmap_reconstruction_loss(up_hat[..., ch], upper[..., ch])
+        terms["trunk_velocity_loss"] = expmap_velocity_loss(up_hat[..., ch], upper[..., ch])
     if position_terms:  # frame-to-frame joint displacement, cm (optional recipe term)
         pv_errors = position_velocity_errors(up_hat, lo_hat, upper, lower)
         terms["position_velocity_loss"] = position_velocity_loss(pv_errors)

@@ -26,6 +26,8 @@ import jax.numpy as jnp
 import optax
 from flax.training.train_state import TrainState
 
+from jaxgest.motion import body
+from jaxgest.tgst.autoencoder import TRUNK_JOINTS
 from jaxgest.tgst.config import Config
 from jaxgest.tgst.losses import ae_loss_terms, transformer_loss_terms  # noqa: F401  (ae_loss_terms re-exported)
 from jaxgest.tgst.model import Params, autoencoder_module, encode_pair, transformer_module
@@ -49,18 +51,23 @@ def create_transformer_state(cfg: Config, tr_params: Params,
 def make_ae_train_step(cfg: Config, tx: optax.GradientTransformation) -> Step:
     """Adam step on the mean exp-map reconstruction loss (§3.5), plus ``train.autoencoder.velocity_weight`` times
     the exp-map frame-to-frame difference term and ``train.autoencoder.position_velocity_weight`` times the
-    joint-displacement term when they are set (not in the paper); batch ``{"upper", "lower"}``."""
+    joint-displacement term when they are set, and the trunk joints' errors ``train.autoencoder.trunk_weight``
+    times (not in the paper); batch ``{"upper", "lower"}``."""
 
     del tx  # the state's own optimiser applies the update
 
     def loss_fn(params, batch, key, step):
         del key, step  # deterministic model (no dropout), constant loss weights
         t = cfg.train.autoencoder  # optional recipe terms (not in the paper)
-        terms = ae_loss_terms(params, batch, cfg=cfg.model, position_terms=bool(t.position_velocity_weight))
+        terms = ae_loss_terms(params, batch, cfg=cfg.model, position_terms=bool(t.position_velocity_weight),
+                              trunk_terms=t.trunk_weight != 1.0)
         metrics = {k: jnp.mean(v) for k, v in terms.items()}
         loss = metrics["loss"]
         if t.velocity_weight:
             loss = loss + t.velocity_weight * metrics["velocity_loss"]
+        if t.trunk_weight != 1.0:  # the trunk's share of both terms counted trunk_weight times
+            extra = metrics["trunk_loss"] + t.velocity_weight * metrics["trunk_velocity_loss"]
+            loss = loss + (t.trunk_weight - 1.0) * (len(TRUNK_JOINTS) / len(body.BODY)) * extra
         if t.position_velocity_weight:
             term = "position_velocity_loss" if t.position_velocity_joints == "all" else "upper_position_velocity_loss"
             loss = loss + t.position_velocity_weight * metrics[term]

@@ -23,9 +23,10 @@ import sys
 import jax
 import numpy as np
 
-from jaxgest.motion import body, datasets
+from jaxgest.motion import datasets
 from jaxgest.tgst import baselines
 from jaxgest.tgst import model as tmodel
+from jaxgest.tgst.autoencoder import upper_joint_channels
 
 from diagnose import body_upper_lower, load_params, roundtrip
 
@@ -86,8 +87,7 @@ def main(argv) -> int:
                   f"{r['speed_ratio']:.3f} / {r['speed_ratio_0_5']:.3f}  joints {r['joint_ratio_min']:.2f}-"
                   f"{r['joint_ratio_max']:.2f}", flush=True)
             for group in args.true_joints:
-                idx = [body.UPPER.index(j) for j in group.split(",")]
-                cols = np.concatenate([np.arange(3 * i, 3 * i + 3) for i in idx])
+                cols = upper_joint_channels(group.split(","))
                 swapped = []
                 for (u, l), (up, _) in zip(outs, held):
                     u = u.copy()

@@ -309,9 +309,14 @@ def expmap_velocity_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
 TRUNK_JOINTS = ("Hips", "Spine", "Chest")
 
 
+def upper_joint_channels(joints) -> np.ndarray:
+    """Exp-map channels of the named joints in the upper-body layout (:data:`jaxgest.motion.body.UPPER`)."""
+    return np.concatenate([np.arange(3 * i, 3 * i + 3) for i in (body.UPPER.index(j) for j in joints)])
+
+
 def trunk_channels() -> np.ndarray:
-    """Exp-map channels of :data:`TRUNK_JOINTS` in the upper-body layout (:data:`jaxgest.motion.body.UPPER`)."""
-    return np.concatenate([np.arange(3 * i, 3 * i + 3) for i in (body.UPPER.index(j) for j in TRUNK_JOINTS)])
+    """Exp-map channels of :data:`TRUNK_JOINTS` in the upper-body layout."""
+    return upper_joint_channels(TRUNK_JOINTS)
 
 
 def angular_error_rad(pred: jax.Array, target: jax.Array) -> jax.Array:

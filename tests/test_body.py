@@ -229,3 +229,49 @@ def test_other_memoised_structures_are_read_only():
     for a in (where, levels[1][0], levels[1][1]):
         with pytest.raises(ValueError, match="read-only"):
             a[0] = 0
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1))
+def test_nearest_branch_keeps_every_rotation_and_the_identity_joints(seed):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(6, 8, 3))
+    v *= rng.uniform(0.0, np.pi, size=(6, 8, 1)) / np.linalg.norm(v, axis=-1, keepdims=True)  # principal |v| <= pi
+    ref = B.rest_expmaps(B.LOWER)
+    out = B.nearest_branch(v, ref)
+    q_in, q_out = R.expmap_to_quat(v), R.expmap_to_quat(out)
+    assert R.quat_angle(R.quat_mul(R.quat_inv(q_in), q_out)).max() < 1e-6  # the same rotations
+    still = np.linalg.norm(ref, axis=-1) < 1e-9  # joints resting at the identity keep the principal branch
+    np.testing.assert_array_equal(out[:, still], v[:, still])
+    nearer = np.linalg.norm(out - ref, axis=-1) <= np.linalg.norm(v - ref, axis=-1) + 1e-12
+    assert nearer.all()
+
+
+def test_rest_branch_is_continuous_where_the_principal_exp_map_jumps():
+    """An upper leg swinging through the antipode of its rest rotation (pi): the principal exp-map jumps by
+    ~2 pi, the branch nearest the rest pose moves by the step of the swing; training data with
+    ``expmap_branch="rest"`` has the same rotations and an unchanged upper body."""
+    import dataclasses
+
+    from jaxgest.tgst import data as tdata
+    from jaxgest.tgst.config import preset
+
+    sk = B.body_skeleton()
+    leg = sk.index("UpperLeg_L")
+    F = 64
+    rot = np.tile(B.body_tpose(), (F, 1, 1))
+    axis = B.rest_expmaps(("UpperLeg_L",))[0] / np.pi  # the rest rotation is pi about this axis
+    rot[:, leg] = R.expmap_to_quat(np.outer(np.linspace(np.pi - 0.3, np.pi + 0.3, F), axis))  # through pi
+    m = Motion(sk, rot, np.broadcast_to(sk.offsets, (F, 21, 3)).copy(), fps=30)
+    cfg = preset("tiny")
+    rest = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, autoencoder=dataclasses.replace(
+        cfg.train.autoencoder, expmap_branch="rest")))
+    a, b = tdata.prepare_clips([m], cfg), tdata.prepare_clips([m], rest)
+    step = lambda x: np.abs(np.diff(x.reshape(len(x), -1, 3)[:, 0], axis=0)).max()  # UpperLeg_L, per frame
+    assert step(a.lower[0]) > 5.0  # the principal branch jumps to the antipode
+    assert step(b.lower[0]) < 0.05  # 0.6 rad over the clip
+    np.testing.assert_array_equal(a.upper[0], b.upper[0])
+    np.testing.assert_array_equal(a.mirrored_upper[0], b.mirrored_upper[0])
+    for x, y in ((a.lower[0], b.lower[0]), (a.mirrored_lower[0], b.mirrored_lower[0])):
+        qx, qy = (R.expmap_to_quat(z.reshape(len(z), -1, 3).astype(np.float64)) for z in (x, y))
+        assert R.quat_angle(R.quat_mul(R.quat_inv(qx), qy)).max() < 1e-3  # float32 storage

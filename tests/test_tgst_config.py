@@ -99,6 +99,9 @@ def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
         apply_overrides(TINY, {"train.autoencoder.trunk_weight": 0.5})
     with pytest.raises(JaxgestError, match="is a section"):
         apply_overrides(TINY, {"model.autoencoder": 3})
+    with pytest.raises(JaxgestError, match="expmap_branch must be one of"):
+        apply_overrides(TINY, {"train.autoencoder.expmap_branch": "nearest"})
+    assert apply_overrides(TINY, {"train.autoencoder.expmap_branch": "rest"}).train.autoencoder.expmap_branch == "rest"
     # fields that must agree are changed together and checked once: a wider latent and its token width
     wide = apply_overrides(preset("fit"), {"model.autoencoder.encoder_channels": (64, 32, 32),
                                            "model.transformer.token_dim": 128})

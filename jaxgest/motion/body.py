@@ -136,6 +136,33 @@ def body_tpose() -> np.ndarray:
     return RT.locals_from_globals(body_skeleton(), tpose_globals("bandai_namco"))
 
 
+def rest_expmaps(joints=BODY) -> np.ndarray:
+    """Exp-maps ``(J, 3)`` of the canonical body's rest (T-pose) local rotations of ``joints`` (names)."""
+    names = body_skeleton().names
+    q = body_tpose()[[names.index(j) for j in joints]]
+    return np.asarray(R.quat_to_expmap(q), np.float64)
+
+
+def nearest_branch(v: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Exp-maps ``(..., J, 3)`` -> the same rotations, each on the branch of the logarithm nearest ``ref`` (J, 3).
+
+    A rotation by ``theta`` about the unit axis ``n`` is ``theta n`` on the principal branch (``|v| <= pi``) and
+    equally ``(theta - 2 pi) n``; of the two this keeps the one nearer to the joint's ``ref`` (Euclidean).
+    Joints that rest at a rotation of ~pi (the Bandai-Namco rig's upper legs, :func:`rest_expmaps`) jump
+    between antipodal principal exp-maps whenever they cross pi (in 91 of the 144 training clips of
+    experiments/tgst_bandai); on the branch nearest the rest pose they vary continuously. Joints resting
+    near the identity are unchanged (the other branch has ``|v| >= pi``). Not in paper 000, which states
+    exp-maps only: an option of the autoencoder's training targets
+    (``AutoencoderTrainConfig.expmap_branch``); every value is still the exp-map of the same rotation.
+    """
+    v = np.asarray(v, np.float64)
+    theta = np.linalg.norm(v, axis=-1, keepdims=True)
+    alt = v - 2.0 * np.pi * v / np.maximum(theta, 1e-12)
+    ref = np.asarray(ref, np.float64)
+    keep = (np.square(v - ref).sum(-1) <= np.square(alt - ref).sum(-1))[..., None]
+    return np.where(keep, v, alt)
+
+
 @dataclasses.dataclass(frozen=True)
 class BodyClip:
     """A motion in the body representation of paper 000.

@@ -72,6 +72,7 @@ SWAP_SIMILARITIES = ("dot", "scaled")
 AE_LR_SCHEDULES = ("constant", "cosine")
 AE_SAMPLINGS = ("windows", "content")
 POSITION_VELOCITY_JOINTS = ("all", "upper")  # joints of the optional joint-displacement term
+EXPMAP_BRANCHES = ("principal", "rest")  # branch of the training targets' exp-maps (body.nearest_branch)
 TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
 PRESETS = ("tiny", "paper", "fit", "fit-pca", "fit-smooth")  # names accepted by preset()
 METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
@@ -226,9 +227,15 @@ class AutoencoderTrainConfig:
     # weight of the squared frame-to-frame differences in the least-squares start of a lapped linear path
     # (``AutoencoderConfig.linear_context`` > 0; autoencoder.lapped_decoder_fit): larger = smoother start
     init_velocity_weight: float = 0.0
+    # lower-body exp-maps of the training clips (the lower decoder's targets, never an input): "principal"
+    # (|v| <= pi, the paper's) or "rest": each joint on the branch nearest the canonical rest pose
+    # (body.nearest_branch; not in the paper), continuous for joints resting at ~pi (the Bandai-Namco upper
+    # legs). Outputs are written as rotations either way, so inference does not depend on it
+    expmap_branch: str = "principal"
 
     def __post_init__(self):
         for name, value, allowed in (("lr_schedule", self.lr_schedule, AE_LR_SCHEDULES),
+                                     ("expmap_branch", self.expmap_branch, EXPMAP_BRANCHES),
                                      ("sampling", self.sampling, AE_SAMPLINGS),
                                      ("position_velocity_joints", self.position_velocity_joints, POSITION_VELOCITY_JOINTS)):
             if value not in allowed:

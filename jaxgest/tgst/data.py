@@ -100,6 +100,14 @@ def rig_tpose(skeleton) -> np.ndarray:
     return out
 
 
+def rest_branch(x: np.ndarray, part: str) -> np.ndarray:
+    """Upper ``(F, 39)`` or lower ``(F, 24)`` exp-maps -> the same rotations on the branch nearest the rest pose
+    (:func:`jaxgest.motion.body.nearest_branch`), float32."""
+    joints = body.UPPER if part == "upper" else body.LOWER
+    v = body.nearest_branch(np.asarray(x).reshape(len(x), len(joints), 3), body.rest_expmaps(joints))
+    return v.reshape(len(x), -1).astype(np.float32)
+
+
 def mirror_motion(motion: Motion) -> Motion:
     """``motion`` mirrored about the sagittal plane in the representation of the originals.
 
@@ -122,6 +130,8 @@ def prepare_clips(clips: Sequence, cfg: Config) -> BodyData:
         contents.append(c.content if isinstance(c, datasets.Clip) else name)
         u, l = motion_to_arrays(motion, cfg.model.fps)
         mu, ml = motion_to_arrays(mirror_motion(motion), cfg.model.fps)
+        if cfg.train.autoencoder.expmap_branch == "rest":  # the lower body only: a decoder target, never an input
+            l, ml = rest_branch(l, "lower"), rest_branch(ml, "lower")
         up.append(u), lo.append(l), mup.append(mu), mlo.append(ml), names.append(name)
     return BodyData(up, lo, mup, mlo, names, float(cfg.model.fps), contents)
 

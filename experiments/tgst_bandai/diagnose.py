@@ -8,7 +8,8 @@
    handling of every encode path), PCA-16 (16 numbers per 4 frames, the autoencoder's latent budget, fitted
    on TRAIN_DIR's original clips, and as ``pca16_mix`` on the original + mirrored clips) and the mean pose
    (constant predictor, same data). Per joint, per clip and overall; also the first frame against the
-   interior (frames 16 .. F-17) for the autoencoder.
+   interior (frames 16 .. F-17) for the autoencoder. The lower body decoded from the upper latents: mean
+   geodesic angle per joint and the fraction of joint-frames wrong by more than 90 deg (``lower_angle_deg``).
 2. Round trips as motions: each held-out clip x is re-encoded and decoded (upper and lower body), written on
    x's skeleton as `jaxgest tgst transfer --method autoencoder` does (TGSTModel.to_motion), and compared
    with x: mean arm-joint speed ratio (world positions, forward differences, 8 arm joints) overall and on
@@ -107,10 +108,11 @@ def main(argv) -> int:
     # ---- 1. angles: AE vs PCA-16 vs mean pose
     per_joint = {"autoencoder": []}
     first, interior = [], []
-    ae_out = []
+    ae_out, lower_err = [], []
     for up, lo in held:
         u_hat, l_hat = (np.asarray(a[0]) for a in rec(params["autoencoder"], up))
         ae_out.append((u_hat, l_hat))
+        lower_err.append(np.degrees(np.asarray(angular_error_rad(l_hat, lo))))  # (F, 8), decoded from upper latents
         per_joint["autoencoder"].append(baselines.per_joint_angle_deg(u_hat, up))
         err = np.degrees(np.asarray(angular_error_rad(u_hat, up)))  # (F, 13)
         first.append(err[0].mean())
@@ -159,6 +161,13 @@ def main(argv) -> int:
     for j, name in enumerate(joints + ["mean"]):
         print(f"{name:<12}" + "".join(f"{(np.mean(v, axis=0)[j] if j < len(joints) else np.mean(v)):>14.2f}"
                                       for v in per_joint.values()))
+    report["lower_angle_deg"] = {  # the lower decoder (from the upper body's latents), geodesic per joint
+        "mean": float(np.mean([e.mean() for e in lower_err])),
+        "per_joint": dict(zip(body.LOWER, np.mean([e.mean(0) for e in lower_err], 0).round(3).tolist())),
+        "gross_frac": float(np.mean([(e > 90).mean() for e in lower_err])),  # joint-frames > 90 deg, per clip
+        "per_clip": [round(float(e.mean()), 3) for e in lower_err]}
+    print(f"lower body (decoded from the upper latents): {report['lower_angle_deg']['mean']:.2f} deg, "
+          f"{report['lower_angle_deg']['gross_frac']:.2%} of joint-frames > 90 deg")
     report["ae_first_frame_deg"] = float(np.mean(first))
     report["ae_interior_deg"] = float(np.mean(interior))
 

@@ -24,7 +24,9 @@ def paired(a, b) -> str:
 
 def load(res: pathlib.Path, name: str, seeds, suffix: str) -> dict:
     # angles (and the baselines) from the run without the suffix: the floor contact moves the root only
-    angles = [json.loads((res / f"diag_{name}_s{s}.json").read_text())["angle_deg"] for s in seeds]
+    # (a run diagnosed only with the suffix, with TRAIN_DIR, has its angles and baselines in that file)
+    angles = [json.loads((res / f"diag_{name}_s{s}.json" if (res / f"diag_{name}_s{s}.json").is_file()
+                          else res / f"diag_{name}_s{s}{suffix}.json").read_text())["angle_deg"] for s in seeds]
     runs = [json.loads((res / f"diag_{name}_s{s}{suffix}.json").read_text()) for s in seeds]
     clips = runs[0]["clips"]
     assert all(r["clips"] == clips for r in runs), f"{name}: seeds evaluated on different clips"

@@ -182,3 +182,20 @@ def test_fit_smooth_preset_is_fit_with_the_lapped_linear_path_and_leaves_the_oth
     assert api.count_params("fit-smooth")["autoencoder"] - api.count_params("fit")["autoencoder"] == \
         (12 * 39 * 16 + 16) + (3 * 16 * 4 * 39 + 4 * 39) + (3 * 16 * 4 * 24 + 4 * 24)
     assert Config.from_dict(json.loads(json.dumps(fs.to_dict()))) == fs
+
+
+def test_fit_motion_preset_is_fit_smooth_with_its_training_options_and_every_preset_has_default_steps():
+    from jaxgest.tgst.config import PRESETS
+    from jaxgest.tgst.train import DEFAULT_STEPS
+
+    fs, fm = preset("fit-smooth"), preset("fit-motion")
+    assert fm.model == fs.model  # the same network: only how it is trained differs
+    assert fm.train.transformer == fs.train.transformer
+    assert fm.train.autoencoder == dataclasses.replace(
+        fs.train.autoencoder, expmap_branch="rest", trunk_weight=4.0, position_velocity_weight=0.15,
+        lr_decay_steps=500)
+    assert fs.train.autoencoder.expmap_branch == "principal" and fs.train.autoencoder.trunk_weight == 1.0
+    assert Config.from_dict(json.loads(json.dumps(fm.to_dict()))) == fm
+    assert set(DEFAULT_STEPS) == set(PRESETS) and all(preset(n).name == n for n in PRESETS)
+    with pytest.raises(ValueError, match="fit-motion"):
+        preset("fit-moton")

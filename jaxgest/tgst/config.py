@@ -46,6 +46,13 @@ Presets (``preset(name)``):
   a velocity term in the loss (``velocity_weight=10``). Removes ``fit-pca``'s jumps at the 4-frame block
   boundaries: held-out angle below PCA-16 and half the round-trip speed excess (experiments/tgst_bandai,
   section 2c). Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-smooth --ae-steps 500``.
+* ``"fit-motion"`` -- ``fit-smooth`` trained for motion quality as well as pose (none of it in the paper):
+  the lower body's training targets on the exp-map branch nearest the rest pose (``expmap_branch="rest"``,
+  :func:`jaxgest.motion.body.nearest_branch`: the rig's upper legs rest at pi), the trunk joints weighted 4x
+  (``trunk_weight``) and the joint-displacement term at 0.15 (``position_velocity_weight``), 500 steps on a
+  cosine schedule of 500. On Bandai-Namco, six seeds: held-out angle 6.69-7.08 deg (every seed below PCA-16's
+  7.44), arm speed 1.04-1.08x of the input, no lower-body joint-frame off by more than 90 deg
+  (experiments/tgst_bandai, section 2f). Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-motion``.
 * ``"tiny"`` -- the paper's model (the same :class:`ModelConfig`: the widths are already tiny) with short
   windows and small batches (AE window 64, batch 4; transformer window 128, batch 4) and Adam 1e-3 so tests
   and ``jaxgest demo --quick`` train in seconds to a minute on a CPU. Not the paper's training setup.
@@ -74,7 +81,7 @@ AE_SAMPLINGS = ("windows", "content")
 POSITION_VELOCITY_JOINTS = ("all", "upper")  # joints of the optional joint-displacement term
 EXPMAP_BRANCHES = ("principal", "rest")  # branch of the training targets' exp-maps (body.nearest_branch)
 TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
-PRESETS = ("tiny", "paper", "fit", "fit-pca", "fit-smooth")  # names accepted by preset()
+PRESETS = ("tiny", "paper", "fit", "fit-pca", "fit-smooth", "fit-motion")  # names accepted by preset()
 METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
 
 
@@ -380,7 +387,8 @@ def legacy_to_dict(flat: Mapping[str, Any]) -> dict:
 def preset(name: str = "paper") -> Config:
     """Named preset: ``"paper"`` (published sizes and training setup), ``"fit"`` (the paper's sizes with an
     autoencoder recipe for real data), ``"fit-pca"`` (``fit`` with the PCA-initialised linear path),
-    ``"fit-smooth"`` (``fit`` with the lapped linear path and the velocity term) or ``"tiny"`` (fast tests/demo)."""
+    ``"fit-smooth"`` (``fit`` with the lapped linear path and the velocity term), ``"fit-motion"`` (``fit-smooth``
+    with continuous leg targets, a trunk weight and the displacement term) or ``"tiny"`` (fast tests/demo)."""
     if name == "paper":
         return Config(name="paper", model=ModelConfig(edge_frames=16))
     if name == "tiny":
@@ -410,6 +418,11 @@ def preset(name: str = "paper") -> Config:
                                        velocity_weight=10.0)
         return dataclasses.replace(fit, name="fit-smooth", model=dataclasses.replace(fit.model, autoencoder=ae),
                                    train=dataclasses.replace(fit.train, autoencoder=ae_train))
-    raise ValueError(f"unknown TGST preset {name!r} (expected 'paper', 'fit', 'fit-pca', 'fit-smooth' or 'tiny')")
+    if name == "fit-motion":
+        fs = preset("fit-smooth")
+        ae_train = dataclasses.replace(fs.train.autoencoder, expmap_branch="rest", trunk_weight=4.0,
+                                       position_velocity_weight=0.15, lr_decay_steps=500)
+        return dataclasses.replace(fs, name="fit-motion", train=dataclasses.replace(fs.train, autoencoder=ae_train))
+    raise ValueError(f"unknown TGST preset {name!r} (expected one of {', '.join(PRESETS)})")
 
 

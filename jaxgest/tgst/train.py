@@ -43,7 +43,7 @@ from jaxgest.tgst.workdir import (AE_KIND, AE_SUBDIR, MODEL, TRANSFORMER_KIND,  
                                   transformer_checkpointer)
 
 DEFAULT_STEPS = {"tiny": (200, 200), "paper": (10_000, 10_000), "fit": (6_000, 10_000),
-                 "fit-pca": (6_000, 10_000), "fit-smooth": (1_000, 10_000)}
+                 "fit-pca": (6_000, 10_000), "fit-smooth": (1_000, 10_000), "fit-motion": (500, 10_000)}
 PRESETS = tuple(DEFAULT_STEPS)
 
 

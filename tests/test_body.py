@@ -263,9 +263,12 @@ def test_rest_branch_is_continuous_where_the_principal_exp_map_jumps():
     axis = B.rest_expmaps(("UpperLeg_L",))[0] / np.pi  # the rest rotation is pi about this axis
     rot[:, leg] = R.expmap_to_quat(np.outer(np.linspace(np.pi - 0.3, np.pi + 0.3, F), axis))  # through pi
     m = Motion(sk, rot, np.broadcast_to(sk.offsets, (F, 21, 3)).copy(), fps=30)
-    cfg = preset("tiny")
-    rest = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, autoencoder=dataclasses.replace(
-        cfg.train.autoencoder, expmap_branch="rest")))
+    def branch(name):
+        cfg = preset("tiny")
+        return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, autoencoder=dataclasses.replace(
+            cfg.train.autoencoder, expmap_branch=name)))
+
+    cfg, rest = branch("principal"), branch("rest")
     a, b = tdata.prepare_clips([m], cfg), tdata.prepare_clips([m], rest)
     step = lambda x: np.abs(np.diff(x.reshape(len(x), -1, 3)[:, 0], axis=0)).max()  # UpperLeg_L, per frame
     assert step(a.lower[0]) > 5.0  # the principal branch jumps to the antipode

@@ -55,7 +55,9 @@ Presets (``preset(name)``):
   (experiments/tgst_bandai, section 2f). Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-motion``.
 * ``"tiny"`` -- the paper's model (the same :class:`ModelConfig`: the widths are already tiny) with short
   windows and small batches (AE window 64, batch 4; transformer window 128, batch 4) and Adam 1e-3 so tests
-  and ``jaxgest demo --quick`` train in seconds to a minute on a CPU. Not the paper's training setup.
+  and ``jaxgest demo --quick`` train in seconds to a minute on a CPU; the lower body's training targets on
+  the exp-map branch nearest the rest pose (``expmap_branch="rest"``: the synthetic rig's upper legs rest at
+  pi like Bandai-Namco's and flip branch in up to 30 % of a clip's frames). Not the paper's training setup.
 
 Training windows are scaled to the data (:func:`jaxgest.tgst.data.fit_windows`): each window is
 ``min(preset window, median clip length at cfg.model.fps rounded down to a multiple of 16)``, so the
@@ -396,7 +398,8 @@ def preset(name: str = "paper") -> Config:
             name="tiny",
             model=ModelConfig(edge_frames=16),
             train=TrainConfig(
-                autoencoder=AutoencoderTrainConfig(learning_rate=1e-3, batch_size=4, window=64),
+                autoencoder=AutoencoderTrainConfig(learning_rate=1e-3, batch_size=4, window=64,
+                                                   expmap_branch="rest"),
                 transformer=TransformerTrainConfig(learning_rate=1e-3, batch_size=4, window=128)),
         )
     if name == "fit":

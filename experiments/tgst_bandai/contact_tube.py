@@ -38,7 +38,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from diagnose import body_upper_lower, load_params  # noqa: E402
+from diagnose import arm_speeds, body_upper_lower, load_params  # noqa: E402
 
 TOLS = (0.0, 0.25, 0.5, 0.9)
 
@@ -68,12 +68,6 @@ def lazy_path(lo, hi) -> np.ndarray:
             cur = min(max(cur, lo[k]), hi[k])
         x[k] = cur
     return x
-
-
-def arm_speeds(m, arms):
-    from jaxgest.motion import kinematics
-
-    return np.linalg.norm(np.diff(kinematics.forward_kinematics(m)[:, arms], axis=0), axis=-1) * m.fps * 0.01
 
 
 def main(argv) -> int:

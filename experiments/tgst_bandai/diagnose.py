@@ -71,6 +71,18 @@ def body_upper_lower(motion, fps):
     return bc.upper.astype(np.float32), bc.lower.astype(np.float32)
 
 
+def arm_speeds(m, arms=None) -> np.ndarray:
+    """World speeds (m/s) of the 8 arm joints of motion ``m`` by forward differences: ``(F - 1, 8)``.
+
+    The round trip's speed measure (section 2 of the module docstring); ``arms`` = their joint indices in
+    ``m`` (default: looked up by name)."""
+    from jaxgest.motion import kinematics
+    from jaxgest.tgst.evaluate import _joint_indices
+
+    arms = _joint_indices(m, body.ARMS) if arms is None else arms
+    return np.linalg.norm(np.diff(kinematics.forward_kinematics(m)[:, arms], axis=0), axis=-1) * m.fps * 0.01
+
+
 def speeds(arm_vel):
     """(F, 24) arm velocities -> (F, 8) speeds."""
     return np.linalg.norm(arm_vel.reshape(len(arm_vel), -1, 3), axis=-1)
@@ -200,7 +212,6 @@ def roundtrip(cfg, clips, outs, tolerance=None) -> dict:
     """Section 2 for any reconstruction: ``outs`` = ``(upper, lower)`` exp-maps at the model rate per clip of
     ``clips``, written as motions on each clip's skeleton (``TGSTModel.to_motion`` with floor-contact
     ``tolerance``, default the API's) and compared with it."""
-    from jaxgest.motion import kinematics
     from jaxgest.tgst import api
     from jaxgest.tgst.api import TGSTModel
     from jaxgest.tgst.evaluate import _joint_indices, get_protocol
@@ -213,8 +224,7 @@ def roundtrip(cfg, clips, outs, tolerance=None) -> dict:
         y = writer.to_motion(u_hat, l_hat, x, tolerance=tolerance)
         foot = foot_criterion(y, x)
         arms = _joint_indices(x, body.ARMS)
-        sx, sy = (np.linalg.norm(np.diff(kinematics.forward_kinematics(m)[:, arms], axis=0), axis=-1)
-                  * x.fps * 0.01 for m in (x, y))  # (F-1, 8) world arm-joint speeds, m/s, forward differences
+        sx, sy = arm_speeds(x, arms), arm_speeds(y, arms)  # (F-1, 8) world arm-joint speeds, m/s
         r = {"clip": clip.path.name, "speed_ratio": float(sy.mean() / sx.mean()),
              "speed_ratio_0_5": float(sy[:6].mean() / sx[:6].mean()),
              "joint_interior_ratio": (sy[6:-6].mean(0) / sx[6:-6].mean(0)).tolist(),

@@ -85,14 +85,12 @@ def main(argv=None) -> int:
 
 def input_arm_speeds(eval_dir: pathlib.Path) -> dict:
     """Per held-out clip: (mean world arm-joint speed in m/s, number of speed frames), as diagnose.roundtrip."""
-    from jaxgest.motion import body, datasets, kinematics
-    from jaxgest.tgst.evaluate import _joint_indices
+    from diagnose import arm_speeds
+    from jaxgest.motion import datasets
 
     out = {}
     for clip in datasets.load_folder(eval_dir, progress=False):
-        x = clip.motion
-        sx = (np.linalg.norm(np.diff(kinematics.forward_kinematics(x)[:, _joint_indices(x, body.ARMS)], axis=0),
-                             axis=-1) * x.fps * 0.01)
+        sx = arm_speeds(clip.motion)
         out[clip.path.name] = (float(sx.mean()), len(sx))
     return out
 

@@ -100,12 +100,11 @@ def rig_tpose(skeleton) -> np.ndarray:
     return out
 
 
-def rest_branch(x: np.ndarray, part: str) -> np.ndarray:
-    """Upper ``(F, 39)`` or lower ``(F, 24)`` exp-maps -> the same rotations on the branch nearest the rest pose
-    (:func:`jaxgest.motion.body.nearest_branch`), float32."""
-    joints = body.UPPER if part == "upper" else body.LOWER
-    v = body.nearest_branch(np.asarray(x).reshape(len(x), len(joints), 3), body.rest_expmaps(joints))
-    return v.reshape(len(x), -1).astype(np.float32)
+def lower_on_rest_branch(lower: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Lower-body exp-maps ``(F, 24)`` -> the same rotations on the branch nearest ``ref`` (``(8, 3)``, the rest
+    pose: ``body.rest_expmaps(body.LOWER)``; :func:`jaxgest.motion.body.nearest_branch`), float32."""
+    v = body.nearest_branch(np.asarray(lower).reshape(len(lower), len(body.LOWER), 3), ref)
+    return v.reshape(len(lower), -1).astype(np.float32)
 
 
 def mirror_motion(motion: Motion) -> Motion:
@@ -124,14 +123,16 @@ def prepare_clips(clips: Sequence, cfg: Config) -> BodyData:
     if not len(clips):
         raise DataError("TGST data: no clips")
     up, lo, mup, mlo, names, contents = [], [], [], [], [], []
+    # the lower body only: a decoder target, never an input
+    rest = body.rest_expmaps(body.LOWER) if cfg.train.autoencoder.expmap_branch == "rest" else None
     for i, c in enumerate(clips):
         motion = c.motion if isinstance(c, datasets.Clip) else c
         name = str(c.path) if isinstance(c, datasets.Clip) else (motion.name or f"clip {i}")
         contents.append(c.content if isinstance(c, datasets.Clip) else name)
         u, l = motion_to_arrays(motion, cfg.model.fps)
         mu, ml = motion_to_arrays(mirror_motion(motion), cfg.model.fps)
-        if cfg.train.autoencoder.expmap_branch == "rest":  # the lower body only: a decoder target, never an input
-            l, ml = rest_branch(l, "lower"), rest_branch(ml, "lower")
+        if rest is not None:
+            l, ml = lower_on_rest_branch(l, rest), lower_on_rest_branch(ml, rest)
         up.append(u), lo.append(l), mup.append(mu), mlo.append(ml), names.append(name)
     return BodyData(up, lo, mup, mlo, names, float(cfg.model.fps), contents)
 

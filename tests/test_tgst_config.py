@@ -195,6 +195,10 @@ def test_fit_motion_preset_is_fit_smooth_with_its_training_options_and_every_pre
         fs.train.autoencoder, expmap_branch="rest", trunk_weight=4.0, position_velocity_weight=0.15,
         lr_decay_steps=500)
     assert fs.train.autoencoder.expmap_branch == "principal" and fs.train.autoencoder.trunk_weight == 1.0
+    # the paper preset keeps the paper's exp-maps; tiny (tests, demo) trains on the rest branch: its synthetic
+    # rig's upper legs also rest at pi
+    assert preset("paper").train.autoencoder.expmap_branch == "principal"
+    assert preset("tiny").train.autoencoder.expmap_branch == "rest"
     assert Config.from_dict(json.loads(json.dumps(fm.to_dict()))) == fm
     assert set(DEFAULT_STEPS) == set(PRESETS) and all(preset(n).name == n for n in PRESETS)
     with pytest.raises(ValueError, match="fit-motion"):

@@ -24,35 +24,27 @@ import numpy as np
 def main(argv=None) -> int:
     from tqdm.auto import tqdm
 
-    from jaxgest import metrics
-    from jaxgest.motion.datasets import load_clip_audio, load_folder
+    from jaxgest.motion.datasets import load_clip_audio
     from jaxgest.zeggs import evaluate as ev
     from jaxgest.zeggs.inference import load_model
+    from script_floor import frechet, other_script_distance, test_split
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdir", required=True), ap.add_argument("--datasets", nargs="+", required=True)
     ap.add_argument("--seed", type=int, default=0), ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
 
-    def fd(x, y):
-        return metrics.frechet_distance_from_statistics(*metrics.gaussian_statistics(x), *metrics.gaussian_statistics(y))
-
     feats = ev.motion_statistics_features
     model = load_model(a.workdir)
-    data = {d: [c for c in load_folder(d) if c.audio is not None] for d in a.datasets}
-    by_label = {d: {(c.content, c.style): c for c in clips} for d, clips in data.items()}
     rows = []
-    for d, clips in data.items():
-        train, test = ev._split_by_style(clips, a.seed)
-        real = np.concatenate([feats(c.motion) for c in test])
-        floor = fd(np.concatenate([feats(c.motion) for c in train]), real)
+    for d in a.datasets:
+        train, test, real, floor = test_split(d, a.seed)
         gen = []
         for c in tqdm(test, desc=str(d), leave=False):
             audio, sr = load_clip_audio(c)
             gen.append(feats(model.generate(audio, [ev.style_example(c, train).motion], sr=sr, seed=a.seed)))
-        model_fd = fd(np.concatenate(gen), real)
-        others = [fd(np.concatenate([feats(by_label[o][(c.content, c.style)].motion) for c in test]), real)
-                  for o in a.datasets if o != d]
+        model_fd = frechet(np.concatenate(gen), real)
+        others = [other_script_distance(test, real, o) for o in a.datasets if o != d]
         rows.append({"data": d, "floor": floor, "model": model_fd, "other_scripts": others,
                      "other_median": float(np.median(others))})
         print(f"{d}: floor {floor:.0f}, model {model_fd:.0f} ({model_fd / floor:.2f}x), real other scripts median "

@@ -20,28 +20,44 @@ import sys
 import numpy as np
 
 
-def main(argv=None) -> int:
+def frechet(x: np.ndarray, y: np.ndarray) -> float:
+    """Fréchet distance between the per-frame feature sets ``x`` and ``y`` (Gaussian statistics)."""
     from jaxgest import metrics
+
+    return metrics.frechet_distance_from_statistics(*metrics.gaussian_statistics(x), *metrics.gaussian_statistics(y))
+
+
+def test_split(folder, seed: int = 0) -> tuple[list, list, np.ndarray, float]:
+    """(train clips, test clips, the test clips' features, the floor) of a folder, split as `evaluate`."""
     from jaxgest.motion.datasets import load_folder
     from jaxgest.zeggs import evaluate as ev
 
+    clips = [c for c in load_folder(folder) if c.audio is not None]
+    train, test = ev._split_by_style(clips, seed)
+    real = np.concatenate([ev.motion_statistics_features(c.motion) for c in test])
+    floor = frechet(np.concatenate([ev.motion_statistics_features(c.motion) for c in train]), real)
+    return train, test, real, floor
+
+
+def other_script_distance(test, real: np.ndarray, folder) -> float:
+    """Fréchet distance to ``real`` of the clips of ``folder`` with the test clips' contents and styles."""
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.zeggs import evaluate as ev
+
+    by_label = {(c.content, c.style): c for c in load_folder(folder)}
+    return frechet(np.concatenate([ev.motion_statistics_features(by_label[(c.content, c.style)].motion)
+                                   for c in test]), real)
+
+
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", required=True), ap.add_argument("--others", nargs="+", required=True)
     ap.add_argument("--seed", type=int, default=0), ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
 
-    def fd(x, y):
-        return metrics.frechet_distance_from_statistics(*metrics.gaussian_statistics(x), *metrics.gaussian_statistics(y))
-
-    clips = [c for c in load_folder(a.data) if c.audio is not None]
-    train, test = ev._split_by_style(clips, a.seed)
-    real = np.concatenate([ev.motion_statistics_features(c.motion) for c in test])
-    floor = fd(np.concatenate([ev.motion_statistics_features(c.motion) for c in train]), real)
-    out = {"data": a.data, "test_clips": len(test), "floor": floor, "other_scripts": {}}
-    for folder in a.others:
-        d = {(c.content, c.style): c for c in load_folder(folder)}
-        feats = np.concatenate([ev.motion_statistics_features(d[(c.content, c.style)].motion) for c in test])
-        out["other_scripts"][folder] = fd(feats, real)
+    _, test, real, floor = test_split(a.data, a.seed)
+    out = {"data": a.data, "test_clips": len(test), "floor": floor,
+           "other_scripts": {folder: other_script_distance(test, real, folder) for folder in a.others}}
     v = np.array(list(out["other_scripts"].values()))
     print(f"{a.data}: {len(test)} test clips; floor (train half vs test half) {floor:.0f}")
     for k, x in out["other_scripts"].items():

@@ -34,7 +34,7 @@ def restored_soft(params, cu, su, *, cfg, alpha=1.0):
                                style_valid=s_range)
     a, b = c_range
     real_x = zx[:, a:b]
-    s0, s1 = s_range if isinstance(s_range, tuple) else (0, s_range)
+    s0, s1 = s_range
     mu = real_x.mean(1, keepdims=True)
     gain = zs[:, s0:s1].std(1, keepdims=True) / (real_x.std(1, keepdims=True) + 1e-6)
     upper, lower = M.decode(params["autoencoder"], mu + (zx - mu) * gain ** alpha, cfg=cfg)

@@ -27,8 +27,7 @@ import numpy as np
 def hands(motion):
     from jaxgest.motion import body, kinematics
 
-    pos = kinematics.root_local_positions(motion) if hasattr(kinematics, "root_local_positions") else \
-        kinematics.forward_kinematics(motion)
+    pos = kinematics.root_local_positions(motion)
     return pos[:, body.joint_indices(motion.skeleton, body.HANDS)].reshape(len(pos), -1)
 
 

@@ -410,3 +410,39 @@ def test_pose_statistics_leave_out_clip_ends():
     ref = NormStats.from_data(spiked)
     np.testing.assert_array_equal(old.mean, ref.mean)
     np.testing.assert_array_equal(old.std, ref.std)
+
+
+def test_initial_poses_own_or_previous_row():
+    """initial_pose_shuffle: probability 0 is the paper (each row's own first frame); 1 takes the previous
+    row's; in between each row is one of the two, about that often; a batch of one keeps its own."""
+    rng = np.random.default_rng(0)
+    pose = jnp.asarray(rng.normal(size=(400, 5, 3)), jnp.float32)
+    key = jax.random.key(3)
+    own, prev = np.asarray(pose[:, 0]), np.roll(np.asarray(pose[:, 0]), 1, axis=0)
+    np.testing.assert_array_equal(steps.initial_poses(pose, key, 0.0), own)
+    np.testing.assert_array_equal(steps.initial_poses(pose, key, 1.0), prev)
+    got = np.asarray(steps.initial_poses(pose, key, 0.5))
+    is_own, is_prev = (got == own).all(1), (got == prev).all(1)
+    assert (is_own | is_prev).all()
+    assert 0.4 < is_prev.mean() < 0.6, is_prev.mean()
+    np.testing.assert_array_equal(steps.initial_poses(pose[:1], key, 1.0), own[:1])
+    with pytest.raises(ValueError, match="initial_pose_shuffle"):
+        Config().override(initial_pose_shuffle=1.5)
+
+
+def test_initial_pose_shuffle_changes_only_the_generators_start(params):
+    """The shuffle draws from its own key: at 0 the loss is the paper's step exactly; at 1 on a batch whose
+    rows are equal (rolling them changes nothing) it is exactly that too, and on distinct rows it differs."""
+    stats = steps.pose_stats(CFG)
+    batch = _batch()
+    key = jax.random.key(1)
+
+    def loss(cfg, b):
+        return np.asarray(steps.loss_terms(params, b, key, 100, cfg=cfg, pose_mean=stats["mean"],
+                                           pose_std=stats["std"], deterministic=True)["loss"])
+
+    base = loss(TINY, batch)
+    np.testing.assert_array_equal(loss(TINY.override(initial_pose_shuffle=0.0), batch), base)
+    assert not np.allclose(loss(TINY.override(initial_pose_shuffle=1.0), batch), base)
+    same = {k: jnp.broadcast_to(v[:1], v.shape) for k, v in batch.items()}
+    np.testing.assert_array_equal(loss(TINY.override(initial_pose_shuffle=1.0), same), loss(TINY, same))

@@ -190,6 +190,9 @@ class TrainConfig(_Compiled):
     style_sampling: str = "disjoint"  # where a training style window comes from (jaxgest.zeggs.data.style_window):
     #   "overlap" (the paper: contains the target), "disjoint" (same clip, apart from the target) or
     #   "other-clip" (another clip of the same style label); see the module docstring
+    initial_pose_shuffle: float = 0.0  # probability that a training row starts the generator from another
+    #   row's first pose (the previous row of the batch) instead of its own; 0 = the paper (always its own).
+    #   Not in the paper: an experiment on which input carries the style (jaxgest.zeggs.steps.initial_poses)
     speed_augmentation: float = 0.1  # +-10 % speed changes of whole sequences (data pipeline)
     mirror: bool = True  # add mirrored sequences (data pipeline)
     steps: int = 120_000  # default number of training steps (the authors')
@@ -202,6 +205,8 @@ class TrainConfig(_Compiled):
             raise ValueError(f"kl_reduction must be 'mean' or 'sum', got {self.kl_reduction!r}")
         if not self.style_window_min <= self.style_window_max:
             raise ValueError("style_window_min must be <= style_window_max")
+        if not 0.0 <= self.initial_pose_shuffle <= 1.0:
+            raise ValueError(f"initial_pose_shuffle must be in [0, 1], got {self.initial_pose_shuffle}")
         if self.style_sampling not in ("overlap", "disjoint", "other-clip"):
             raise ValueError(f"style_sampling must be 'overlap', 'disjoint' or 'other-clip', got {self.style_sampling!r}")
 

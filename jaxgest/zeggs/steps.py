@@ -68,6 +68,21 @@ def pose_stats(cfg: ModelConfig, mean=None, std=None) -> dict[str, jax.Array]:
     return {"mean": jnp.asarray(mean), "std": jnp.asarray(std)}
 
 
+def initial_poses(pose: jax.Array, key: jax.Array, probability: float) -> jax.Array:
+    """The generator's initial poses ``(B, P)`` of a batch of targets ``pose (B, T, P)``: each row's own
+    first frame, or with ``probability`` (independently per row) the first frame of the previous row of the
+    batch (``jnp.roll`` by one; a batch of one keeps its own). ``probability`` 0 is the paper (training
+    starts from the target's own first pose, §4.3); above 0 the initial pose no longer tells the generator
+    the target's style reliably, so the style must come from the embedding (``initial_pose_shuffle``, an
+    experiment of ``experiments/zeggs_synthetic``, not the paper).
+    """
+    own = pose[:, 0]
+    if probability <= 0.0:
+        return own
+    swap = jax.random.bernoulli(key, probability, (pose.shape[0],))
+    return jnp.where(swap[:, None], jnp.roll(own, 1, axis=0), own)
+
+
 def loss_terms(params, batch: dict, key: jax.Array, step, *, cfg: Config, pose_mean: jax.Array,
                pose_std: jax.Array, deterministic: bool = False) -> dict[str, jax.Array]:
     """Per-example loss terms ``(B,)``: ``loss`` (eq. 1), ``recon`` (eq. 2), ``kl``, and each MAE term."""
@@ -78,9 +93,11 @@ def loss_terms(params, batch: dict, key: jax.Array, step, *, cfg: Config, pose_m
     chex.assert_shape(batch["root_rotation"], (B, T, 4))
     chex.assert_shape(batch["facing"], (B, 3))
     k_drop, k_sample = jax.random.split(key)
+    # the shuffle's key is folded from the step key, so dropout and the style sample draw the same as without it
+    pose0 = initial_poses(batch["pose"], jax.random.fold_in(key, 0x1_5E), t.initial_pose_shuffle)
     style = batch["style"] * input_scale(m, pose_mean, pose_std)[None, None]  # style inputs: group normalisation
     out, aux = ZeggsModel(m).apply(
-        {"params": params}, batch["speech"], style, batch["style_mask"], batch["pose"][:, 0],
+        {"params": params}, batch["speech"], style, batch["style_mask"], pose0,
         batch["root_position"][:, 0], batch["root_rotation"][:, 0], batch["facing"], k_sample, pose_mean, pose_std,
         deterministic=deterministic, rngs={"dropout": k_drop})
     mean, std = pose_mean[None, None], pose_std[None, None]

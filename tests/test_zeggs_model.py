@@ -430,9 +430,11 @@ def test_initial_poses_own_or_previous_row():
         Config().override(initial_pose_shuffle=1.5)
 
 
-def test_initial_pose_shuffle_changes_only_the_generators_start(params):
+def test_initial_pose_shuffle_changes_only_the_generators_start():
     """The shuffle draws from its own key: at 0 the loss is the paper's step exactly; at 1 on a batch whose
-    rows are equal (rolling them changes nothing) it is exactly that too, and on distinct rows it differs."""
+    rows are equal (rolling them changes nothing) it is exactly that too, and on distinct rows it differs.
+    (Own parameters: the module fixture's are donated by the train-step test.)"""
+    params = init_params(CFG, jax.random.key(5))
     stats = steps.pose_stats(CFG)
     batch = _batch()
     key = jax.random.key(1)

@@ -41,6 +41,13 @@ steps of the ``small`` preset): ``"disjoint"`` is the one where a same-style exa
 reconstructs better than another style's (z 4.5) and than e = 0, and the style probe clears its
 random-init control; with ``"overlap"`` the target's own window dominates.
 
+Initial pose (``initial_pose_shuffle``, default 0 = the paper): training starts the generator from the
+target's own first pose, and inference from the style example's, so part of the style reaches the
+generator through that pose rather than the embedding (``experiments/zeggs_synthetic/static_style.py``:
+about half). A probability above 0 starts that share of the rows from another row's first pose; at 0.5 the
+embedding carries the style (its probe rises, the leakage contrasts grow) but the held-out beat alignment
+is lost, so it is an experiment option, not a default.
+
 The three parts:
 
 * :class:`ModelConfig` -- what rebuilds the network and interprets its inputs and outputs: layer sizes,

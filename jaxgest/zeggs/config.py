@@ -46,8 +46,8 @@ target's own first pose, and inference from the style example's, so part of the 
 generator through that pose rather than the embedding (``experiments/zeggs_synthetic/static_style.py``:
 about half). A probability above 0 starts that share of the rows from another row's first pose; at 0.5 the
 embedding carries the style (its probe rises, the leakage contrasts grow) but the held-out beat alignment
-is lost (three seeds); 0.2 kept it in the one seed trained so far. It stays an experiment option until
-more seeds decide.
+is lost (three seeds); at 0.2 too (three seeds: held-out BeatAlign above its control at z >= 2 in one).
+It stays an experiment option; the paper's 0 is the default of every preset.
 
 The three parts:
 

@@ -430,6 +430,65 @@ def test_initial_poses_own_or_previous_row():
         Config().override(initial_pose_shuffle=1.5)
 
 
+def test_initial_pose_mean_source_and_frame_weight():
+    """initial_pose_source="mean" replaces a swapped row's start by zeros (the normalised mean pose), with the
+    swaps of initial_pose_swaps; the frame weight is 0 on the first frames of swapped rows only, keeps two."""
+    rng = np.random.default_rng(1)
+    pose = jnp.asarray(rng.normal(size=(64, 5, 3)), jnp.float32)
+    key = jax.random.key(4)
+    swap = np.asarray(steps.initial_pose_swaps(key, 0.5, 64))
+    got = np.asarray(steps.initial_poses(pose, key, 0.5, "mean"))
+    np.testing.assert_array_equal(got[swap], 0.0)
+    np.testing.assert_array_equal(got[~swap], np.asarray(pose[:, 0])[~swap])
+    assert 0 < swap.sum() < 64
+    w = np.asarray(steps.initial_pose_frame_weight(jnp.asarray(swap), 10, 3))
+    np.testing.assert_array_equal(w[swap, :3], 0.0)
+    np.testing.assert_array_equal(w[swap, 3:], 1.0)
+    np.testing.assert_array_equal(w[~swap], 1.0)
+    assert steps.initial_pose_frame_weight(jnp.asarray(swap), 10, 0) is None
+    assert np.asarray(steps.initial_pose_frame_weight(jnp.asarray(swap), 10, 50))[swap].sum(1).min() == 2
+    with pytest.raises(ValueError, match="initial_pose_source"):
+        Config().override(initial_pose_source="median")
+    with pytest.raises(ValueError, match="initial_pose_mask_seconds"):
+        Config().override(initial_pose_mask_seconds=-1.0)
+
+
+def test_weighted_mae_is_the_mean_over_kept_frames():
+    """losses.mae with frame weights: all ones is the plain MAE; 0/1 weights are the MAE of the kept frames."""
+    rng = np.random.default_rng(2)
+    a, b = (jnp.asarray(rng.normal(size=(3, 7, 4, 2)), jnp.float32) for _ in range(2))
+    np.testing.assert_allclose(losses.mae(a, b, jnp.ones((3, 7))), losses.mae(a, b), rtol=1e-6)
+    w = np.ones((3, 7), np.float32)
+    w[:, :3] = 0.0
+    np.testing.assert_allclose(losses.mae(a, b, jnp.asarray(w)), losses.mae(a[:, 3:], b[:, 3:]), rtol=1e-6)
+
+
+def test_initial_pose_mask_leaves_out_the_start_of_swapped_rows():
+    """With the mask the loss of a swapped row ignores its first frames: at shuffle 0 it changes nothing
+    (exactly the paper's step), at shuffle 1 it changes the loss, and the masked loss does not depend on the
+    target's first frames (perturbing them leaves it equal) while the unmasked one does."""
+    params = init_params(CFG, jax.random.key(6))
+    stats = steps.pose_stats(CFG)
+    batch = _batch()
+    key = jax.random.key(2)
+
+    def loss(cfg, b):
+        return np.asarray(steps.loss_terms(params, b, key, 100, cfg=cfg, pose_mean=stats["mean"],
+                                           pose_std=stats["std"], deterministic=True)["loss"])
+
+    frames = 4
+    secs = frames / CFG.fps
+    np.testing.assert_array_equal(loss(TINY.override(initial_pose_mask_seconds=secs), batch), loss(TINY, batch))
+    masked = TINY.override(initial_pose_shuffle=1.0, initial_pose_mask_seconds=secs)
+    plain = TINY.override(initial_pose_shuffle=1.0)
+    assert not np.allclose(loss(masked, batch), loss(plain, batch))
+    pose = np.array(batch["pose"])
+    pose[:, 1:frames] += 0.5  # frame 0 (the start) kept
+    bumped = dict(batch, pose=pose)
+    np.testing.assert_allclose(loss(masked, bumped), loss(masked, batch), rtol=1e-5)
+    assert not np.allclose(loss(plain, bumped), loss(plain, batch))
+
+
 def test_initial_pose_shuffle_changes_only_the_generators_start():
     """The shuffle draws from its own key: at 0 the loss is the paper's step exactly; at 1 on a batch whose
     rows are equal (rolling them changes nothing) it is exactly that too, and on distinct rows it differs.

@@ -201,6 +201,10 @@ class TrainConfig(_Compiled):
     initial_pose_shuffle: float = 0.0  # probability that a training row starts the generator from another
     #   row's first pose (the previous row of the batch) instead of its own; 0 = the paper (always its own).
     #   Not in the paper: an experiment on which input carries the style (jaxgest.zeggs.steps.initial_poses)
+    initial_pose_source: str = "row"  # what a shuffled row starts from: "row" (the previous row's first pose)
+    #   or "mean" (the data's mean pose: zeros of the normalised features)
+    initial_pose_mask_seconds: float = 0.0  # seconds at the start of a shuffled row left out of its
+    #   reconstruction loss (the move from the replaced pose to the target's has no target of its own)
     speed_augmentation: float = 0.1  # +-10 % speed changes of whole sequences (data pipeline)
     mirror: bool = True  # add mirrored sequences (data pipeline)
     steps: int = 120_000  # default number of training steps (the authors')
@@ -215,6 +219,10 @@ class TrainConfig(_Compiled):
             raise ValueError("style_window_min must be <= style_window_max")
         if not 0.0 <= self.initial_pose_shuffle <= 1.0:
             raise ValueError(f"initial_pose_shuffle must be in [0, 1], got {self.initial_pose_shuffle}")
+        if self.initial_pose_source not in ("row", "mean"):
+            raise ValueError(f"initial_pose_source must be 'row' or 'mean', got {self.initial_pose_source!r}")
+        if self.initial_pose_mask_seconds < 0.0:
+            raise ValueError(f"initial_pose_mask_seconds must be >= 0, got {self.initial_pose_mask_seconds}")
         if self.style_sampling not in ("overlap", "disjoint", "other-clip"):
             raise ValueError(f"style_sampling must be 'overlap', 'disjoint' or 'other-clip', got {self.style_sampling!r}")
 

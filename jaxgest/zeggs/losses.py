@@ -38,10 +38,19 @@ from jaxgest.zeggs.config import ModelConfig, TrainConfig
 WORLD_FORWARD = (0.0, 0.0, 1.0)
 
 
-def mae(pred: jax.Array, target: jax.Array) -> jax.Array:
-    """Mean absolute error per example: ``(batch, ...) -> (batch,)``."""
+def mae(pred: jax.Array, target: jax.Array, frame_weight: jax.Array | None = None) -> jax.Array:
+    """Mean absolute error per example: ``(batch, T, ...) -> (batch,)``.
+
+    ``frame_weight`` ``(batch, T)`` (optional): a weighted mean over frames of the per-frame means (all ones
+    is the plain mean; a row whose weights are all zero gives 0).
+    """
     chex.assert_equal_shape([pred, target])
-    return jnp.mean(jnp.abs(pred - target).reshape(pred.shape[0], -1), axis=1)
+    err = jnp.abs(pred - target)
+    if frame_weight is None:
+        return jnp.mean(err.reshape(pred.shape[0], -1), axis=1)
+    chex.assert_shape(frame_weight, pred.shape[:2])
+    per_frame = jnp.mean(err.reshape(pred.shape[:2] + (-1,)), axis=2)
+    return jnp.sum(frame_weight * per_frame, 1) / jnp.maximum(jnp.sum(frame_weight, 1), 1e-8)
 
 
 def finite_difference(x: jax.Array, fps: float) -> jax.Array:
@@ -114,7 +123,8 @@ def forward_kinematics(rotation: jax.Array, position: jax.Array, cfg: ModelConfi
 
 def reconstruction_terms(pred_pose: jax.Array, pred_root_position: jax.Array, pred_root_rotation: jax.Array,
                          target_pose: jax.Array, target_root_position: jax.Array,
-                         target_root_rotation: jax.Array, *, cfg: ModelConfig) -> dict[str, jax.Array]:
+                         target_root_rotation: jax.Array, *, cfg: ModelConfig,
+                         frame_weight: jax.Array | None = None) -> dict[str, jax.Array]:
     """Every unweighted MAE term of eq. 2, each ``(batch,)``.
 
     Poses ``(batch, T, P)`` *denormalised*; root positions ``(batch, T, 3)``, rotations ``(batch, T, 4)``.
@@ -125,14 +135,23 @@ def reconstruction_terms(pred_pose: jax.Array, pred_root_position: jax.Array, pr
     Keys: local/world position (L_p), local/world rotation (L_r), local/world velocity (L_vp), local/world
     angular (L_vr), fd_local/world_position (L_dp), fd_local/world_rotation (L_dr), facing (L_f) and the
     root terms of the authors' code (root_position, root_rotation, root_velocity, root_angular).
+    ``frame_weight`` ``(batch, T)`` (optional, not the paper): per-frame weights of every term (a finite
+    difference weighs by the product of its two frames'), e.g. 0 on frames left out of the loss.
     References: Ghorbani et al. 2023, eq. 2.
     """
     chex.assert_equal_shape([pred_pose, target_pose])
     fps = cfg.fps
     p, t = split_pose(pred_pose, cfg), split_pose(target_pose, cfg)
-    fd = finite_difference
+    fd_weight = None if frame_weight is None else frame_weight[:, 1:] * frame_weight[:, :-1]
+
+    def _mae(a, b):
+        return mae(a, b, frame_weight)
+
+    def mae_fd(a, b):  # MAE of the finite-difference velocities
+        return mae(finite_difference(a, fps), finite_difference(b, fps), fd_weight)
+
     if cfg.fk_parents:  # positions of the rendered motion: FK of the rotations (both sides)
-        raw = mae(p["position"], t["position"])
+        raw = _mae(p["position"], t["position"])
         p = {**p, "position": forward_kinematics(p["rotation"], p["position"], cfg)}
         t = {**t, "position": forward_kinematics(t["rotation"], t["position"], cfg)}
     else:
@@ -141,24 +160,24 @@ def reconstruction_terms(pred_pose: jax.Array, pred_root_position: jax.Array, pr
     tw = to_world(t, target_root_position, target_root_rotation)
     return {
         "predicted_position": raw,
-        "local_position": mae(p["position"], t["position"]),
-        "world_position": mae(pw["position"], tw["position"]),
-        "local_rotation": mae(p["rotation"], t["rotation"]),
-        "world_rotation": mae(pw["rotation"], tw["rotation"]),
-        "local_velocity": mae(p["velocity"], t["velocity"]),
-        "world_velocity": mae(pw["velocity"], tw["velocity"]),
-        "local_angular": mae(p["angular"], t["angular"]),
-        "world_angular": mae(pw["angular"], tw["angular"]),
-        "fd_local_position": mae(fd(p["position"], fps), fd(t["position"], fps)),
-        "fd_world_position": mae(fd(pw["position"], fps), fd(tw["position"], fps)),
-        "fd_local_rotation": mae(fd(p["rotation"], fps), fd(t["rotation"], fps)),
-        "fd_world_rotation": mae(fd(pw["rotation"], fps), fd(tw["rotation"], fps)),
-        "root_position": mae(pred_root_position, target_root_position),
-        "root_rotation": mae(rotations.quat_to_matrix(pred_root_rotation),
+        "local_position": _mae(p["position"], t["position"]),
+        "world_position": _mae(pw["position"], tw["position"]),
+        "local_rotation": _mae(p["rotation"], t["rotation"]),
+        "world_rotation": _mae(pw["rotation"], tw["rotation"]),
+        "local_velocity": _mae(p["velocity"], t["velocity"]),
+        "world_velocity": _mae(pw["velocity"], tw["velocity"]),
+        "local_angular": _mae(p["angular"], t["angular"]),
+        "world_angular": _mae(pw["angular"], tw["angular"]),
+        "fd_local_position": mae_fd(p["position"], t["position"]),
+        "fd_world_position": mae_fd(pw["position"], tw["position"]),
+        "fd_local_rotation": mae_fd(p["rotation"], t["rotation"]),
+        "fd_world_rotation": mae_fd(pw["rotation"], tw["rotation"]),
+        "root_position": _mae(pred_root_position, target_root_position),
+        "root_rotation": _mae(rotations.quat_to_matrix(pred_root_rotation),
                              rotations.quat_to_matrix(target_root_rotation)),
-        "root_velocity": mae(p["root_velocity"], t["root_velocity"]),
-        "root_angular": mae(p["root_angular"], t["root_angular"]),
-        "facing": mae(facing_direction(pred_root_rotation), facing_direction(target_root_rotation)),
+        "root_velocity": _mae(p["root_velocity"], t["root_velocity"]),
+        "root_angular": _mae(p["root_angular"], t["root_angular"]),
+        "facing": _mae(facing_direction(pred_root_rotation), facing_direction(target_root_rotation)),
     }
 
 

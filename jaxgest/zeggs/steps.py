@@ -68,19 +68,41 @@ def pose_stats(cfg: ModelConfig, mean=None, std=None) -> dict[str, jax.Array]:
     return {"mean": jnp.asarray(mean), "std": jnp.asarray(std)}
 
 
-def initial_poses(pose: jax.Array, key: jax.Array, probability: float) -> jax.Array:
+def initial_pose_swaps(key: jax.Array, probability: float, batch_size: int) -> jax.Array:
+    """Which rows ``(B,)`` bool of a batch start the generator from a replaced pose (independently, each
+    with ``probability``); all False at 0 (the paper). The draw of :func:`initial_poses` with the same key."""
+    if probability <= 0.0:
+        return jnp.zeros((batch_size,), bool)
+    return jax.random.bernoulli(key, probability, (batch_size,))
+
+
+def initial_poses(pose: jax.Array, key: jax.Array, probability: float, source: str = "row") -> jax.Array:
     """The generator's initial poses ``(B, P)`` of a batch of targets ``pose (B, T, P)``: each row's own
-    first frame, or with ``probability`` (independently per row) the first frame of the previous row of the
-    batch (``jnp.roll`` by one; a batch of one keeps its own). ``probability`` 0 is the paper (training
-    starts from the target's own first pose, §4.3); above 0 the initial pose no longer tells the generator
-    the target's style reliably, so the style must come from the embedding (``initial_pose_shuffle``, an
-    experiment of ``experiments/zeggs_synthetic``, not the paper).
+    first frame, or with ``probability`` (independently per row, :func:`initial_pose_swaps`) a replaced one:
+    ``source="row"`` the first frame of the previous row of the batch (``jnp.roll`` by one; a batch of one
+    keeps its own), ``"mean"`` the data's mean pose (zeros: ``pose`` is normalised). ``probability`` 0 is the
+    paper (training starts from the target's own first pose, §4.3); above 0 the initial pose no longer tells
+    the generator the target's style reliably, so the style must come from the embedding
+    (``initial_pose_shuffle``, an experiment of ``experiments/zeggs_synthetic``, not the paper).
     """
     own = pose[:, 0]
     if probability <= 0.0:
         return own
-    swap = jax.random.bernoulli(key, probability, (pose.shape[0],))
-    return jnp.where(swap[:, None], jnp.roll(own, 1, axis=0), own)
+    swap = initial_pose_swaps(key, probability, pose.shape[0])
+    other = jnp.roll(own, 1, axis=0) if source == "row" else jnp.zeros_like(own)
+    return jnp.where(swap[:, None], other, own)
+
+
+def initial_pose_frame_weight(swap: jax.Array, window: int, frames: int) -> jax.Array | None:
+    """Per-frame loss weights ``(B, T)``: 0 on the first ``frames`` frames of a swapped row, 1 elsewhere
+    (``None`` when nothing is left out). At most ``T - 2`` frames go, so every row keeps a finite difference.
+    The move from a replaced initial pose to the target's has no target of its own
+    (``initial_pose_mask_seconds``; an experiment, not the paper)."""
+    frames = min(int(frames), window - 2)
+    if frames <= 0:
+        return None
+    head = jnp.arange(window)[None, :] < frames
+    return jnp.where(swap[:, None] & head, 0.0, 1.0).astype(jnp.float32)
 
 
 def loss_terms(params, batch: dict, key: jax.Array, step, *, cfg: Config, pose_mean: jax.Array,
@@ -94,7 +116,13 @@ def loss_terms(params, batch: dict, key: jax.Array, step, *, cfg: Config, pose_m
     chex.assert_shape(batch["facing"], (B, 3))
     k_drop, k_sample = jax.random.split(key)
     # the shuffle's key is folded from the step key, so dropout and the style sample draw the same as without it
-    pose0 = initial_poses(batch["pose"], jax.random.fold_in(key, 0x1_5E), t.initial_pose_shuffle)
+    k_pose0 = jax.random.fold_in(key, 0x1_5E)
+    pose0 = initial_poses(batch["pose"], k_pose0, t.initial_pose_shuffle, t.initial_pose_source)
+    swap = initial_pose_swaps(k_pose0, t.initial_pose_shuffle, B)
+    if t.initial_pose_source == "row" and B == 1:  # rolling a batch of one keeps its own pose
+        swap = jnp.zeros_like(swap)
+    masked = round(t.initial_pose_mask_seconds * m.fps) if t.initial_pose_shuffle > 0 else 0
+    frame_weight = initial_pose_frame_weight(swap, T, masked)
     style = batch["style"] * input_scale(m, pose_mean, pose_std)[None, None]  # style inputs: group normalisation
     out, aux = ZeggsModel(m).apply(
         {"params": params}, batch["speech"], style, batch["style_mask"], pose0,
@@ -103,7 +131,7 @@ def loss_terms(params, batch: dict, key: jax.Array, step, *, cfg: Config, pose_m
     mean, std = pose_mean[None, None], pose_std[None, None]
     terms = losses.reconstruction_terms(
         out["pose"] * std + mean, out["root_position"], out["root_rotation"],
-        batch["pose"] * std + mean, batch["root_position"], batch["root_rotation"], cfg=m)
+        batch["pose"] * std + mean, batch["root_position"], batch["root_rotation"], cfg=m, frame_weight=frame_weight)
     kl = losses.kl_divergence(aux["mu"], aux["logvar"], reduction=t.kl_reduction)
     w = losses.kl_weight(step, center=t.kl_center, growth=t.kl_growth, cap=t.kl_cap)
     loss = losses.total_loss(terms, kl, w, cfg=t)

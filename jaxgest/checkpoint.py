@@ -15,6 +15,8 @@ noise (:func:`jaxgest.orbax_noise.quiet_absl`), and the filter of asyncio's "Eve
 (:func:`jaxgest.orbax_noise.closed_loop_errors_muted`) is installed while a Checkpointer is open and removed by
 :meth:`Checkpointer.close` (the command line installs it for the whole command, see :mod:`jaxgest.cli`).
 
+The one-line reasons and the content digest are in :mod:`jaxgest.checkpoint_faults`.
+
 References: STYLE.md (flax examples' orbax usage).
 """
 
@@ -22,7 +24,6 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
-import json
 import logging
 import pathlib
 import sys
@@ -32,6 +33,7 @@ from typing import Any, Callable, Iterable, Mapping, Optional
 import jax
 import numpy as np
 
+from jaxgest.checkpoint_faults import Unreadable, digest, flat, read_reason, tree_shapes, write_reason
 from jaxgest.errors import CheckpointError, WriteError
 from jaxgest.orbax_noise import closed_loop_errors_muted, quiet_absl
 from jaxgest.workdir_format import FORMAT_VERSION, check_workdir_config, config_diff, normalise
@@ -60,80 +62,6 @@ def strict_checkpoints(strict: bool = True):
 def warn(message: str) -> None:
     """One ``jaxgest: warning: ...`` line on stderr (a fault that was handled; the command goes on)."""
     print(f"jaxgest: warning: {message}", file=sys.stderr, flush=True)
-
-
-class _Unreadable(Exception):
-    """A checkpoint step that cannot be read (truncated/corrupted/missing files): ``reason`` says how."""
-
-
-def _reason(e: BaseException) -> str:
-    """A short description of why orbax/tensorstore could not read a checkpoint."""
-    if isinstance(e, _Unreadable):
-        return str(e)
-    texts, seen, x = [], set(), e
-    while x is not None and id(x) not in seen:  # the whole cause chain: orbax wraps tensorstore's error
-        seen.add(id(x))
-        texts.append((str(x).strip().splitlines() or [""])[0])
-        x = x.__cause__ or x.__context__
-    chain = " | ".join(texts)
-    if isinstance(e, json.JSONDecodeError) or "JSONDecodeError" in chain or "Expecting " in chain:
-        return "its metadata is not valid JSON"
-    if any(m in chain for m in ("OUT_OF_RANGE", "byte range", "DATA_LOSS", "Error decoding", "corrupt")):
-        return "a data file is truncated or corrupted"
-    missing = ("NOT_FOUND", "No such file", "does not exist", "not found", "Not found")
-    if isinstance(e, FileNotFoundError) or any(m in chain for m in missing):
-        return "a file is missing"
-    if "Encountered error while reading" in chain:
-        return "a data file is missing or corrupted"
-    text = texts[0]
-    short = text if len(text) <= 100 else text[:97] + "..."
-    return f"{type(e).__name__}: {short}" if short else type(e).__name__
-
-
-def _digest(tree) -> Optional[str]:
-    """sha256 of a pytree's arrays (names, shapes, dtypes, bytes; order-independent of the container types),
-    saved in a checkpoint's meta and verified on restore: a flipped byte that still decodes is caught too.
-    None when an array is not addressable from this process (multi-host sharded state: not checked)."""
-    import hashlib
-
-    h = hashlib.sha256()
-    try:
-        leaves = sorted((_path_names(p), x) for p, x in jax.tree_util.tree_flatten_with_path(tree)[0])
-        for name, x in leaves:
-            a = np.ascontiguousarray(np.asarray(jax.device_get(x)))
-            h.update(repr((name, a.shape, a.dtype.str)).encode())
-            h.update(a.tobytes())
-    except Exception:  # noqa: BLE001  (not fully addressable)
-        return None
-    return h.hexdigest()
-
-
-def _flat(d: Mapping, prefix: str = "") -> dict:
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, Mapping):
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
-def _path_names(path) -> tuple:
-    """A pytree key path as plain names, so optax namedtuples (attributes) compare equal to orbax's stored
-    dict/list metadata."""
-    out = []
-    for k in path:
-        for attr in ("key", "idx", "name"):
-            if hasattr(k, attr):
-                out.append(str(getattr(k, attr)))
-                break
-        else:
-            out.append(str(k))
-    return tuple(out)
-
-
-def _shapes(tree) -> dict:
-    return {_path_names(p): tuple(x.shape) for p, x in jax.tree_util.tree_flatten_with_path(tree)[0]}
 
 
 class Checkpointer:
@@ -234,11 +162,11 @@ class Checkpointer:
                     step, args=self._ocp.args.Composite(meta=self._ocp.args.JsonRestore()))
             meta = restored["meta"]
             if not isinstance(meta, Mapping):
-                raise _Unreadable("its meta item is not a JSON object")
+                raise Unreadable("its meta item is not a JSON object")
         except MemoryError:
             raise
         except Exception as e:  # noqa: BLE001  (orbax/tensorstore raise many types for a damaged file)
-            raise _Unreadable(_reason(e)) from None
+            raise Unreadable(read_reason(e)) from None
         return dict(meta)
 
     def stored_meta(self, step: Optional[int] = None) -> Optional[dict]:
@@ -246,12 +174,12 @@ class Checkpointer:
         if step is not None:
             try:
                 return self._read_meta(step)
-            except _Unreadable as e:
+            except Unreadable as e:
                 raise CheckpointError(f"{self._where(step)} is unreadable ({e})") from None
         for s in reversed(self.all_steps()):
             try:
                 return self._read_meta(s)
-            except _Unreadable:
+            except Unreadable:
                 continue
         return None
 
@@ -275,7 +203,7 @@ class Checkpointer:
         a = {k: v for k, v in stored_config.items() if k not in self.ignore}
         b = {k: v for k, v in self.meta["config"].items() if k not in self.ignore}
         diff = config_diff(a, b)
-        fa, fb = _flat(a), _flat(b)
+        fa, fb = flat(a), flat(b)
         missing, extra = sorted(set(fb) - set(fa)), sorted(set(fa) - set(fb))
         changed = [k for k in set(fa) & set(fb) if fa[k] != fb[k]]
         if not problems and not changed and (missing or extra):
@@ -306,9 +234,9 @@ class Checkpointer:
         payload = {"params": state.params, "opt_state": state.opt_state, "step": state.step}
         before = set(self._tmp_folders())
         meta = {**self.meta, "format_version": FORMAT_VERSION}
-        digest = _digest(payload)
-        if digest is not None:
-            meta["sha256"] = digest
+        checksum = digest(payload)
+        if checksum is not None:
+            meta["sha256"] = checksum
         try:
             with quiet_absl():
                 self.manager.save(
@@ -326,7 +254,7 @@ class Checkpointer:
             last = [s for s in self.all_steps() if s != step]
             kept = (f"the last good checkpoint (step {last[-1]}) is kept" if last else
                     "no checkpoint was written")
-            raise WriteError(f"{self._where(step)} could not be written ({_write_reason(e)}); stopped, "
+            raise WriteError(f"{self._where(step)} could not be written ({write_reason(e)}); stopped, "
                                   f"{kept}") from None
 
     def _settle(self, timeout: float = 120.0) -> None:
@@ -380,7 +308,7 @@ class Checkpointer:
         for s in self._candidates(step):
             try:
                 out = read(s)
-            except _Unreadable as e:
+            except Unreadable as e:
                 bad.append((s, str(e)))
                 if self._strict() or step is not None:
                     older = [t for t in self.all_steps() if t < s]
@@ -452,11 +380,11 @@ class Checkpointer:
                 if mismatch:
                     raise CheckpointError(f"{self.directory}: checkpoint at step {step} does not fit this "
                                           f"model ({mismatch})") from None
-            raise _Unreadable(_reason(e)) from None
-        if meta.get("sha256") is not None and _digest(restored) not in (None, meta["sha256"]):
-            raise _Unreadable("its arrays do not match the checksum saved with them")
+            raise Unreadable(read_reason(e)) from None
+        if meta.get("sha256") is not None and digest(restored) not in (None, meta["sha256"]):
+            raise Unreadable("its arrays do not match the checksum saved with them")
         if not bool(jax.device_get(all_finite(restored))):
-            raise _Unreadable("it holds NaN/inf values, which training never saves")
+            raise Unreadable("it holds NaN/inf values, which training never saves")
         return restored
 
     def _structure_mismatch(self, step: int, abstract) -> Optional[str]:
@@ -464,10 +392,10 @@ class Checkpointer:
         try:
             with quiet_absl():
                 md = self._ocp.StandardCheckpointer().metadata(self.directory / str(step) / "state")
-            stored = _shapes(getattr(md, "item_metadata", md))
+            stored = tree_shapes(getattr(md, "item_metadata", md))
         except Exception:  # noqa: BLE001
             return None
-        want = _shapes(abstract)
+        want = tree_shapes(abstract)
         if stored == want or not stored:  # nothing listed: the tree metadata itself is damaged
             return None
         missing = sorted(set(want) - set(stored))
@@ -523,22 +451,6 @@ class Checkpointer:
             self.manager.close()
         finally:
             self._muted.close()
-
-
-def _write_reason(e: BaseException) -> str:
-    """Why a write failed, short: the OS error (e.g. 'No space left on device') when there is one."""
-    first, seen = e, set()
-    while e is not None and id(e) not in seen:
-        seen.add(id(e))
-        if isinstance(e, OSError) and e.strerror:
-            return e.strerror
-        text = str(e)
-        for marker, say in (("No space left", "No space left on device"), ("Read-only file system",
-                            "Read-only file system"), ("Permission denied", "Permission denied")):
-            if marker in text:
-                return say
-        e = e.__cause__ or e.__context__
-    return _reason(first)
 
 
 def _abstract_like(x):

@@ -463,19 +463,25 @@ def test_weighted_mae_is_the_mean_over_kept_frames():
     np.testing.assert_allclose(losses.mae(a, b, jnp.asarray(w)), losses.mae(a[:, 3:], b[:, 3:]), rtol=1e-6)
 
 
-def test_initial_pose_mask_leaves_out_the_start_of_swapped_rows():
-    """With the mask the loss of a swapped row ignores its first frames: at shuffle 0 it changes nothing
-    (exactly the paper's step), at shuffle 1 it changes the loss, and the masked loss does not depend on the
-    target's first frames (perturbing them leaves it equal) while the unmasked one does."""
-    params = init_params(CFG, jax.random.key(6))
+def _eval_loss(seed: int, key_seed: int):
+    """``loss(cfg, batch) -> (B,)`` of deterministic loss_terms at step 100 with fresh tiny parameters (own
+    parameters: the module fixture's are donated by the train-step test)."""
+    params = init_params(CFG, jax.random.key(seed))
     stats = steps.pose_stats(CFG)
-    batch = _batch()
-    key = jax.random.key(2)
+    key = jax.random.key(key_seed)
 
     def loss(cfg, b):
         return np.asarray(steps.loss_terms(params, b, key, 100, cfg=cfg, pose_mean=stats["mean"],
                                            pose_std=stats["std"], deterministic=True)["loss"])
 
+    return loss
+
+
+def test_initial_pose_mask_leaves_out_the_start_of_swapped_rows():
+    """With the mask the loss of a swapped row ignores its first frames: at shuffle 0 it changes nothing
+    (exactly the paper's step), at shuffle 1 it changes the loss, and the masked loss does not depend on the
+    target's first frames (perturbing them leaves it equal) while the unmasked one does."""
+    loss, batch = _eval_loss(6, 2), _batch()
     frames = 4
     secs = frames / CFG.fps
     np.testing.assert_array_equal(loss(TINY.override(initial_pose_mask_seconds=secs), batch), loss(TINY, batch))
@@ -492,16 +498,8 @@ def test_initial_pose_mask_leaves_out_the_start_of_swapped_rows():
 def test_initial_pose_shuffle_changes_only_the_generators_start():
     """The shuffle draws from its own key: at 0 the loss is the paper's step exactly; at 1 on a batch whose
     rows are equal (rolling them changes nothing) it is exactly that too, and on distinct rows it differs.
-    (Own parameters: the module fixture's are donated by the train-step test.)"""
-    params = init_params(CFG, jax.random.key(5))
-    stats = steps.pose_stats(CFG)
-    batch = _batch()
-    key = jax.random.key(1)
-
-    def loss(cfg, b):
-        return np.asarray(steps.loss_terms(params, b, key, 100, cfg=cfg, pose_mean=stats["mean"],
-                                           pose_std=stats["std"], deterministic=True)["loss"])
-
+    """
+    loss, batch = _eval_loss(5, 1), _batch()
     base = loss(TINY, batch)
     np.testing.assert_array_equal(loss(TINY.override(initial_pose_shuffle=0.0), batch), base)
     assert not np.allclose(loss(TINY.override(initial_pose_shuffle=1.0), batch), base)

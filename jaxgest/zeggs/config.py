@@ -47,7 +47,11 @@ generator through that pose rather than the embedding (``experiments/zeggs_synth
 about half). A probability above 0 starts that share of the rows from another row's first pose; at 0.5 the
 embedding carries the style (its probe rises, the leakage contrasts grow) but the held-out beat alignment
 is lost (three seeds); at 0.2 too (three seeds: held-out BeatAlign above its control at z >= 2 in one).
-It stays an experiment option; the paper's 0 is the default of every preset.
+Two further options isolate where that cost comes from (``initial_pose_mask_seconds``: the first seconds of a
+shuffled row are left out of its loss; ``initial_pose_source="mean"``: a shuffled row starts from the mean
+pose instead of another style's): at 0.2 on one seed each restores most of the held-out beat alignment
+while keeping the embedding's style; more seeds decide. All stay experiment options; the paper's 0 is
+the default of every preset.
 
 The three parts:
 

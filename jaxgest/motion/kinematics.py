@@ -30,7 +30,7 @@ from jaxgest.motion.skeleton import Motion, Skeleton, mirror_pairs, mirror_partn
 from jaxgest.motion.taut_string import taut_string  # noqa: F401 (re-exported; floor_contact_tube's solver)
 
 # root_motion builds on this module's FK, so its names are re-exported lazily (PEP 562), not imported here
-_ROOT_MOTION = ("swing_twist", "_hips_index", "remove_root_yaw", "restore_root_yaw", "set_root_position",
+_ROOT_MOTION = ("swing_twist", "remove_root_yaw", "restore_root_yaw", "set_root_position",
                 "FOOT_HINTS", "foot_joints", "lowest_foot_height", "floor_contact", "shift_root_height",
                 "floor_contact_tube")
 
@@ -43,6 +43,27 @@ def __getattr__(name: str):
 
 def __dir__():
     return sorted(list(globals()) + list(_ROOT_MOTION))
+
+
+# ---------------------------------------------------------------------------------------------------
+# The root joint
+
+def _root_and_parent(skeleton: Skeleton, root: str | None):
+    if root is None:
+        root_idx = _hips_index(skeleton)
+    else:
+        root_idx = skeleton.index(root)
+    return root_idx, int(skeleton.parents[root_idx])
+
+
+def _hips_index(skeleton: Skeleton) -> int:
+    """The hips: the first joint from the file root with more than one child (skips static wrappers)."""
+    j = int(np.flatnonzero(skeleton.parents < 0)[0])
+    while True:
+        kids = np.flatnonzero(skeleton.parents == j)
+        if len(kids) != 1:
+            return j
+        j = int(kids[0])
 
 
 # ---------------------------------------------------------------------------------------------------

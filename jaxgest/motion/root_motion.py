@@ -12,7 +12,8 @@ import numpy as np
 
 from jaxgest.errors import DataError
 from jaxgest.motion import rotations as R
-from jaxgest.motion.kinematics import forward_kinematics, global_rotations, global_transforms
+from jaxgest.motion.kinematics import (  # noqa: F401 (_hips_index re-exported)
+    _hips_index, _root_and_parent, forward_kinematics, global_rotations, global_transforms)
 from jaxgest.motion.skeleton import Motion, Skeleton
 from jaxgest.motion.taut_string import taut_string
 
@@ -35,24 +36,6 @@ def swing_twist(q: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray
     twist = np.where(n > 1e-12, twist / np.maximum(n, 1e-12), ident)
     swing = R.quat_mul(q, R.quat_inv(twist))
     return swing, twist
-
-
-def _root_and_parent(skeleton: Skeleton, root: str | None):
-    if root is None:
-        root_idx = _hips_index(skeleton)
-    else:
-        root_idx = skeleton.index(root)
-    return root_idx, int(skeleton.parents[root_idx])
-
-
-def _hips_index(skeleton: Skeleton) -> int:
-    """The hips: the first joint from the file root with more than one child (skips static wrappers)."""
-    j = int(np.flatnonzero(skeleton.parents < 0)[0])
-    while True:
-        kids = np.flatnonzero(skeleton.parents == j)
-        if len(kids) != 1:
-            return j
-        j = int(kids[0])
 
 
 def remove_root_yaw(motion: Motion, root: str | None = None) -> tuple[Motion, np.ndarray]:

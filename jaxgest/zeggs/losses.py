@@ -174,7 +174,7 @@ def reconstruction_terms(pred_pose: jax.Array, pred_root_position: jax.Array, pr
         "fd_world_rotation": mae_fd(pw["rotation"], tw["rotation"]),
         "root_position": _mae(pred_root_position, target_root_position),
         "root_rotation": _mae(rotations.quat_to_matrix(pred_root_rotation),
-                             rotations.quat_to_matrix(target_root_rotation)),
+                              rotations.quat_to_matrix(target_root_rotation)),
         "root_velocity": _mae(p["root_velocity"], t["root_velocity"]),
         "root_angular": _mae(p["root_angular"], t["root_angular"]),
         "facing": _mae(facing_direction(pred_root_rotation), facing_direction(target_root_rotation)),

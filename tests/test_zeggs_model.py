@@ -493,6 +493,23 @@ def test_initial_pose_mask_leaves_out_the_start_of_swapped_rows():
     bumped = dict(batch, pose=pose)
     np.testing.assert_allclose(loss(masked, bumped), loss(masked, batch), rtol=1e-5)
     assert not np.allclose(loss(plain, bumped), loss(plain, batch))
+    pose = np.array(batch["pose"])
+    pose[:, frames] += 0.5  # the first kept frame counts
+    kept = dict(batch, pose=pose)
+    assert (np.abs(loss(masked, kept) - loss(masked, batch)) > 1e-4).all()
+
+
+def test_initial_pose_mask_and_start_agree_on_the_swapped_rows():
+    """At shuffle 0.5 with the mask, the rows the draw keeps have exactly the paper's per-row loss (own start,
+    no mask) and the swapped rows do not: the start and the mask come from one draw (initial_pose_swaps on
+    the step key's fold, as loss_terms makes it)."""
+    loss, batch = _eval_loss(7, 3), _batch(B=16, seed=3)
+    swap = np.asarray(steps.initial_pose_swaps(jax.random.fold_in(jax.random.key(3), 0x1_5E), 0.5, 16))
+    assert 0 < swap.sum() < 16
+    base = loss(TINY, batch)
+    got = loss(TINY.override(initial_pose_shuffle=0.5, initial_pose_mask_seconds=3 / CFG.fps), batch)
+    np.testing.assert_allclose(got[~swap], base[~swap], rtol=1e-5)
+    assert (np.abs(got[swap] - base[swap]) > 1e-4 * np.abs(base[swap])).all()
 
 
 def test_initial_pose_shuffle_changes_only_the_generators_start():

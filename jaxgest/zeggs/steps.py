@@ -76,7 +76,8 @@ def initial_pose_swaps(key: jax.Array, probability: float, batch_size: int) -> j
     return jax.random.bernoulli(key, probability, (batch_size,))
 
 
-def initial_poses(pose: jax.Array, key: jax.Array, probability: float, source: str = "row") -> jax.Array:
+def initial_poses(pose: jax.Array, key: jax.Array, probability: float, source: str = "row",
+                  swap: jax.Array | None = None) -> jax.Array:
     """The generator's initial poses ``(B, P)`` of a batch of targets ``pose (B, T, P)``: each row's own
     first frame, or with ``probability`` (independently per row, :func:`initial_pose_swaps`) a replaced one:
     ``source="row"`` the first frame of the previous row of the batch (``jnp.roll`` by one; a batch of one
@@ -84,11 +85,14 @@ def initial_poses(pose: jax.Array, key: jax.Array, probability: float, source: s
     paper (training starts from the target's own first pose, §4.3); above 0 the initial pose no longer tells
     the generator the target's style reliably, so the style must come from the embedding
     (``initial_pose_shuffle``, an experiment of ``experiments/zeggs_synthetic``, not the paper).
+    ``swap`` ``(B,)`` bool: the rows to replace, when the caller has drawn them already (the draw of
+    :func:`initial_pose_swaps` with ``key``; :func:`loss_terms` passes it, so the mask and the start agree).
     """
     own = pose[:, 0]
     if probability <= 0.0:
         return own
-    swap = initial_pose_swaps(key, probability, pose.shape[0])
+    if swap is None:
+        swap = initial_pose_swaps(key, probability, pose.shape[0])
     other = jnp.roll(own, 1, axis=0) if source == "row" else jnp.zeros_like(own)
     return jnp.where(swap[:, None], other, own)
 
@@ -97,7 +101,15 @@ def initial_pose_frame_weight(swap: jax.Array, window: int, frames: int) -> jax.
     """Per-frame loss weights ``(B, T)``: 0 on the first ``frames`` frames of a swapped row, 1 elsewhere
     (``None`` when nothing is left out). At most ``T - 2`` frames go, so every row keeps a finite difference.
     The move from a replaced initial pose to the target's has no target of its own
-    (``initial_pose_mask_seconds``; an experiment, not the paper)."""
+    (``initial_pose_mask_seconds``; an experiment, not the paper).
+
+    What is left out is each masked frame's own terms (and every finite difference that touches it), so the
+    loss does not depend on the target there. The prediction over those frames still matters downstream:
+    the generator integrates its root velocity from the first frame, so a root drift made on masked frames
+    carries into the root and world terms (``root_position``, ``world_*``, ``facing``) of later, kept frames.
+    Weights are 0/1 and each term is a per-row mean over the kept frames (:func:`jaxgest.zeggs.losses.mae`),
+    so a masked row weighs as much as an unmasked one in the batch mean, and logged loss values of masked
+    runs are means over fewer frames (not comparable term by term with unmasked runs)."""
     frames = min(int(frames), window - 2)
     if frames <= 0:
         return None
@@ -117,10 +129,10 @@ def loss_terms(params, batch: dict, key: jax.Array, step, *, cfg: Config, pose_m
     k_drop, k_sample = jax.random.split(key)
     # the shuffle's key is folded from the step key, so dropout and the style sample draw the same as without it
     k_pose0 = jax.random.fold_in(key, 0x1_5E)
-    pose0 = initial_poses(batch["pose"], k_pose0, t.initial_pose_shuffle, t.initial_pose_source)
     swap = initial_pose_swaps(k_pose0, t.initial_pose_shuffle, B)
     if t.initial_pose_source == "row" and B == 1:  # rolling a batch of one keeps its own pose
         swap = jnp.zeros_like(swap)
+    pose0 = initial_poses(batch["pose"], k_pose0, t.initial_pose_shuffle, t.initial_pose_source, swap=swap)
     masked = round(t.initial_pose_mask_seconds * m.fps) if t.initial_pose_shuffle > 0 else 0
     frame_weight = initial_pose_frame_weight(swap, T, masked)
     style = batch["style"] * input_scale(m, pose_mean, pose_std)[None, None]  # style inputs: group normalisation

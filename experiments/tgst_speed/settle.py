@@ -2,13 +2,13 @@
 
     python experiments/tgst_speed/settle.py 8 [rounds]     # needs torch (pip install ".[bench]")
 
-One process, the peer case's inputs and the same jitted TGST transfer. Interleaved rounds of four timed
+One process, the peer case's inputs and the same jitted TGST transfer. Interleaved rounds of six timed
 blocks (each block ``inner`` calls, median of rounds):
-  jit_alone    jit after jit (no torch call since the previous jit block)
-  jit_after    jit right after a torch call (2 threads), as in the peer harness's rounds
-  jit_settled  jit after a torch call and a 0.3 s pause
-  jit_rewarmed jit after a torch call and one untimed jit call
-  torch        the torch peer (2 threads), right after a jit call
+  jit_alone       jit after jit (no torch call since the previous jit block)
+  jit_after       jit right after a torch call (2 threads), as in the peer harness's rounds
+  jit_settled     jit after a torch call and a 0.3 s pause
+  jit_rewarmed    jit after a torch call and one untimed jit call
+  torch           the torch peer (2 threads), right after a jit call
   torch_rewarmed  torch after a jit call and one untimed torch call
 Prints each block's median wall ms and the ratios to jit_alone.
 """

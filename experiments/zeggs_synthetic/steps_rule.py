@@ -7,7 +7,8 @@ from the JSONs each run's ``eval_run.sh`` wrote (or their ``window_runs.json`` e
 Each argument after ``out`` is one seed's runs in order of training length. Per run: pooled style probe,
 its paired difference to the raw statistics (SE over the 672 clips), held-out leakage z and held-out
 BeatAlign z. Per seed: the paired probe difference of each longer run against the first one, per dataset
-(16 units, SE over units, ddof 1). The gap **shrinks** if in every seed the second run minus the first is
+(16 units, SE over units, ddof 1); over seeds, the second run minus the first for the probe (its gap to the
+raw statistics moves by as much: they do not depend on the weights), held-out Fréchet x floor and held-out BeatAlign - shuffled. The gap **shrinks** if in every seed the second run minus the first is
 > 0 at z >= 2; it **closes** at a step count if there, in every seed, probe - raw statistics >= 0, held-out
 leakage z >= 3 and held-out BeatAlign z >= 2.
 """
@@ -27,7 +28,11 @@ def run_measures(out: Path, run: str) -> dict:
     m = measures(out, run)
     st = load(out, f"eval_pooled_{run}")["probe_pooled"]["style"]
     raw = st["trained_minus"]["raw_statistics"]
+    eh = load(out, f"eval_{run}_heldout")
+    f = eh["frechet_distance"]
     m.update(minus_raw=raw["mean"], minus_raw_se=raw["standard_error"],
+             heldout_frechet_x_floor=f["generated_vs_real"] / f["real_train_vs_real_test"],
+             heldout_beat=eh["beat_alignment"]["generated_vs_control"]["mean"],
              units=dict(zip(st["trained"]["unit_names"], st["trained"]["per_unit"])))
     return m
 
@@ -72,11 +77,21 @@ def main() -> int:
     print(f"\nshrinks with training (second run − first > 0 at z >= 2 in every seed): {shrinks}")
     for r, c in closes.items():
         print(f"closes at {r} (probe − raw >= 0, leakage z >= 3, BeatAlign z >= 2 in every seed): {c}")
+    over = {}
+    if len(res) > 1 and all(len(ms) > 1 for ms in res):
+        print("\nsecond run − first, over seeds (SE over seeds, ddof 1):")
+        for k in ("probe", "heldout_frechet_x_floor", "heldout_beat"):
+            d = np.array([ms[1][k] - ms[0][k] for ms in res])
+            se = float(d.std(ddof=1) / np.sqrt(len(d)))
+            over[k] = {"per_seed": d.tolist(), "mean": float(d.mean()), "standard_error": se,
+                       "z": float(d.mean() / se) if se > 0 else None}
+            print(f"  {k}: {d.mean():+.3f} ± {se:.3f} (z {over[k]['z'] or 0:.1f}); per seed "
+                  + " ".join(f"{x:+.3f}" for x in d))
     if a.json:
         for ms in res:
             for m in ms:
                 m.pop("units")
-        a.json.write_text(json.dumps({"seeds": res, "shrinks": shrinks, "closes": closes}, indent=2) + "\n")
+        a.json.write_text(json.dumps({"seeds": res, "shrinks": shrinks, "closes": closes, "over_seeds": over}, indent=2) + "\n")
     return 0
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -58,10 +59,12 @@ def main() -> int:
     print("| seed | run | pooled style probe | − raw statistics (± SE) | − first run, per dataset (± SE, z) "
           "| held-out leakage z | held-out BeatAlign z |")
     print("|---:|---|---:|---:|---:|---:|---:|")
-    for i, runs in enumerate(seeds):
+    for runs in seeds:
         ms = [run_measures(a.out, r) for r in runs]
+        m_ = re.search(r"_s(\d+)$", runs[0])
+        i = int(m_.group(1)) if m_ else 0  # the training seed, from the run name (no suffix: seed 0)
         for j, (r, m) in enumerate(zip(runs, ms)):
-            m["run"] = r
+            m["run"], m["seed"] = r, i
             m["vs_first"] = paired_units(ms[0]["units"], m["units"]) if j else None
             v = m["vs_first"]
             vs = f"{v['mean']:+.3f} ± {v['standard_error']:.3f} (z {v['z'] or 0:.1f})" if v else "—"

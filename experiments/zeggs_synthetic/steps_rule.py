@@ -8,8 +8,8 @@ Each argument after ``out`` is one seed's runs in order of training length. Per 
 its paired difference to the raw statistics (SE over the 672 clips), held-out leakage z and held-out
 BeatAlign z. Per seed: the paired probe difference of each longer run against the first one, per dataset
 (16 units, SE over units, ddof 1); over seeds, the second run minus the first for the probe (its gap to the
-raw statistics moves by as much: they do not depend on the weights), held-out Fréchet x floor and held-out BeatAlign - shuffled. The gap **shrinks** if in every seed the second run minus the first is
-> 0 at z >= 2; it **closes** at a step count if there, in every seed, probe - raw statistics >= 0, held-out
+raw statistics moves by as much: they do not depend on the weights), held-out Fréchet x floor and held-out
+BeatAlign - shuffled. The gap **shrinks** if in every seed the second run minus the first is > 0 at z >= 2; it **closes** at a step count if there, in every seed, probe - raw statistics >= 0, held-out
 leakage z >= 3 and held-out BeatAlign z >= 2.
 """
 from __future__ import annotations
@@ -25,11 +25,19 @@ from initial_pose_table import load
 from seed_rule import measures
 
 
+def mean_se(d) -> dict:
+    """Mean, SE (ddof 1), z (None when SE = 0) and n of the differences ``d``."""
+    d = np.asarray(d, np.float64)
+    se = float(d.std(ddof=1) / np.sqrt(len(d)))
+    return {"mean": float(d.mean()), "standard_error": se, "z": float(d.mean() / se) if se > 0 else None,
+            "n": int(len(d))}
+
+
 def run_measures(out: Path, run: str) -> dict:
     m = measures(out, run)
     st = load(out, f"eval_pooled_{run}")["probe_pooled"]["style"]
     raw = st["trained_minus"]["raw_statistics"]
-    eh = load(out, f"eval_{run}_heldout")
+    eh = load(out, f"eval_{run}_heldout")  # read by measures() too; a few kB
     f = eh["frechet_distance"]
     m.update(minus_raw=raw["mean"], minus_raw_se=raw["standard_error"],
              heldout_frechet_x_floor=f["generated_vs_real"] / f["real_train_vs_real_test"],
@@ -42,10 +50,7 @@ def paired_units(a: dict, b: dict) -> dict:
     """``b - a`` per dataset (the same 16 datasets in both), mean, SE (ddof 1) and z."""
     if set(a) != set(b):
         raise SystemExit("steps_rule: the two runs were probed on different datasets")
-    d = np.array([b[k] - a[k] for k in sorted(a)])
-    se = float(d.std(ddof=1) / np.sqrt(len(d)))
-    return {"mean": float(d.mean()), "standard_error": se, "z": float(d.mean() / se) if se > 0 else None,
-            "n": int(len(d))}
+    return mean_se([b[k] - a[k] for k in sorted(a)])
 
 
 def main() -> int:
@@ -61,8 +66,8 @@ def main() -> int:
     print("|---:|---|---:|---:|---:|---:|---:|")
     for runs in seeds:
         ms = [run_measures(a.out, r) for r in runs]
-        m_ = re.search(r"_s(\d+)$", runs[0])
-        i = int(m_.group(1)) if m_ else 0  # the training seed, from the run name (no suffix: seed 0)
+        suffix = re.search(r"_s(\d+)$", runs[0])
+        i = int(suffix.group(1)) if suffix else 0  # the training seed, from the run name (no suffix: seed 0)
         for j, (r, m) in enumerate(zip(runs, ms)):
             m["run"], m["seed"] = r, i
             m["vs_first"] = paired_units(ms[0]["units"], m["units"]) if j else None
@@ -84,17 +89,17 @@ def main() -> int:
     if len(res) > 1 and all(len(ms) > 1 for ms in res):
         print("\nsecond run − first, over seeds (SE over seeds, ddof 1):")
         for k in ("probe", "heldout_frechet_x_floor", "heldout_beat"):
-            d = np.array([ms[1][k] - ms[0][k] for ms in res])
-            se = float(d.std(ddof=1) / np.sqrt(len(d)))
-            over[k] = {"per_seed": d.tolist(), "mean": float(d.mean()), "standard_error": se,
-                       "z": float(d.mean() / se) if se > 0 else None}
-            print(f"  {k}: {d.mean():+.3f} ± {se:.3f} (z {over[k]['z'] or 0:.1f}); per seed "
+            d = [ms[1][k] - ms[0][k] for ms in res]
+            over[k] = {"per_seed": d, **mean_se(d)}
+            o = over[k]
+            print(f"  {k}: {o['mean']:+.3f} ± {o['standard_error']:.3f} (z {o['z'] or 0:.1f}); per seed "
                   + " ".join(f"{x:+.3f}" for x in d))
     if a.json:
         for ms in res:
             for m in ms:
                 m.pop("units")
-        a.json.write_text(json.dumps({"seeds": res, "shrinks": shrinks, "closes": closes, "over_seeds": over}, indent=2) + "\n")
+        a.json.write_text(json.dumps({"seeds": res, "shrinks": shrinks, "closes": closes, "over_seeds": over},
+                                     indent=2) + "\n")
     return 0
 
 

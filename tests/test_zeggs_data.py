@@ -84,8 +84,10 @@ def test_sequences_and_batches(synth_dir):
         data.batch(0, seed=0, batch=2, window=10_000, style_min=64, style_max=128)
 
 
-def _seqs(lengths, styles, clips):
-    return [types.SimpleNamespace(frames=n, style=s, clip=c) for n, s, c in zip(lengths, styles, clips)]
+def _seqs(lengths, styles, clips, mirrored=None):
+    mirrored = mirrored or [False] * len(lengths)
+    return [types.SimpleNamespace(frames=n, style=s, clip=c, mirrored=mi, speed=1.0)
+            for n, s, c, mi in zip(lengths, styles, clips, mirrored)]
 
 
 @settings(max_examples=60, deadline=None)
@@ -94,7 +96,9 @@ def _seqs(lengths, styles, clips):
 def test_style_window_modes(frames, window, smin, extra, seed):
     smax = smin + extra
     rng = np.random.default_rng(seed)
-    seqs = _seqs([frames, frames + 7, 300], ["a", "a", "b"], ["x.bvh", "y.bvh", "z.bvh"])
+    # y.bvh is x.bvh's same-style other clip; its mirror (index 3) is another variant and never chosen
+    seqs = _seqs([frames, frames + 7, 300, frames + 7], ["a", "a", "b", "a"], ["x.bvh", "y.bvh", "z.bvh", "y.bvh"],
+                 [False, False, False, True])
     if frames >= window + smin:  # disjoint: the target lies outside the style window
         t0, (j, s0, m) = zdata.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
                                         sampling="disjoint")
@@ -144,10 +148,10 @@ def test_batch_sampling_modes(synth_dir, tmp_path):
                 assert any(u <= t0 and t0 + 64 <= u + len(style) for u in hits)
             elif mode == "disjoint" or alone:
                 assert hits and all(u + len(style) <= t0 or u >= t0 + 64 for u in hits)
-            else:  # another clip of the same style
+            else:  # another clip of the same style, the same variant (a mirror swaps the dominant hand)
                 assert not hits
                 src = [o for o, x in zip(data.sequences, norms) if o.clip != s.clip and _find(x, style)]
-                assert src and all(o.style == s.style for o in src)
+                assert src and all(o.style == s.style and o.mirrored == s.mirrored for o in src)
     with pytest.raises(DataError, match="unknown style sampling"):
         data.batch(0, sampling="nearby", **kw)
     with pytest.raises(DataError, match="disjoint"):  # 5 s clips: no room for 64 + 300 frames apart

@@ -19,8 +19,11 @@ built-in synthetic data) to fixed-size training batches (paper 001 §4.1, §4.3)
 
   - ``overlap`` (the paper, §4.3): from the same sequence, containing the target window;
   - ``disjoint``: from the same sequence, not overlapping the target window (before or after it);
-  - ``other-clip``: from a sequence of *another* clip with the same style label (any of its mirrored /
-    sped-up variants); a sequence whose style has no other clip falls back to ``disjoint``.
+  - ``other-clip``: from a sequence of *another* clip with the same style label and the same variant
+    (mirrored or not, same speed) as the target; a sequence whose style has no other clip falls back to
+    ``disjoint``. The variant must match: a mirrored performance swaps the dominant hand, so the mirror of a
+    right-handed style is a left-handed one (on the synthetic data ``neutral`` and ``left_handed`` differ
+    only by that), and a style example of the other variant would teach the encoder to ignore handedness.
 
   SPEC §4 allows a style window apart from the target if it is measured against the paper's; the
   comparison (leakage report, probes) is in ``experiments/zeggs_synthetic/README.md``.
@@ -71,6 +74,8 @@ class AlignedSequence:
     facing: np.ndarray  # (3,) world facing target of the clip
     clip: str = ""  # the source clip (same for its mirrored / sped-up variants)
     content: str = ""  # the source clip's content label
+    mirrored: bool = False  # the left/right mirror of the source clip
+    speed: float = 1.0  # playback speed factor of the augmentation (1.0 = as recorded)
 
     @property
     def frames(self) -> int:
@@ -129,7 +134,7 @@ def clip_sequences(clip: Clip, *, fps: float, mirror: bool = True, speeds: Seque
                 name=f"{clip.path.stem if clip.path else clip.content}{suffix}@{speed:g}",
                 style=clip.style, pose=pose[:n], speech=sp[:n], root_position=feats["root_position"][:n],
                 root_rotation=rot, facing=clip_facing(rot), clip=str(clip.path) if clip.path else clip.content,
-                content=clip.content))
+                content=clip.content, mirrored=bool(suffix), speed=float(speed)))
     return out
 
 
@@ -209,8 +214,9 @@ def style_window(sequences, i: int, rng, *, window: int, style_min: int, style_m
     * ``disjoint``: ``j = i``, ``[s0, s0 + m)`` and ``[t0, t0 + window)`` do not intersect (needs
       ``frames >= window + style_min``; the target start is redrawn until one side has room, after 32
       draws the target starts at 0);
-    * ``other-clip``: ``j`` is a sequence of another source clip with the same style label (uniform over
-      those at least ``style_min`` frames long), the window anywhere in it; without one, ``disjoint``.
+    * ``other-clip``: ``j`` is a sequence of another source clip with the same style label and the same
+      variant (``mirrored`` and ``speed``; uniform over those at least ``style_min`` frames long), the
+      window anywhere in it; without one, ``disjoint``.
 
     ``rng`` is a ``numpy.random.Generator`` (the batch's), so the draw is deterministic in it.
     """
@@ -218,7 +224,8 @@ def style_window(sequences, i: int, rng, *, window: int, style_min: int, style_m
     F = s.frames
     if sampling == "other-clip":
         others = [k for k, o in enumerate(sequences)
-                  if o.style == s.style and o.clip != s.clip and o.frames >= style_min]
+                  if o.style == s.style and o.clip != s.clip and o.frames >= style_min
+                  and o.mirrored == s.mirrored and o.speed == s.speed]
         if others:
             t0 = int(rng.integers(0, F - window + 1))
             j = others[int(rng.integers(len(others)))]

@@ -38,7 +38,8 @@ Style sampling (``style_sampling``; SPEC §4): the paper draws the training styl
 *contains* the target window (``"overlap"``), which lets the style embedding describe the target's own
 gestures (content) instead of the style. SPEC §4 allows a window apart from the target if it is measured
 against the paper's; the default ``"disjoint"`` takes it from the same clip but not overlapping the target
-(``"other-clip"``: another clip with the same style label). The three were compared on identical data and
+(``"other-clip"``: another clip with the same style label, in the target's variant: mirrored or not, same
+speed, since a mirror swaps the dominant hand). The three were compared on identical data and
 steps with ``jaxgest zeggs evaluate``'s leakage report and probes (``experiments/zeggs_synthetic``, 1,200
 steps of the ``small`` preset): ``"disjoint"`` is the one where a same-style example of other content
 reconstructs better than another style's (z 4.5) and than e = 0, and the style probe clears its

@@ -84,10 +84,11 @@ def test_sequences_and_batches(synth_dir):
         data.batch(0, seed=0, batch=2, window=10_000, style_min=64, style_max=128)
 
 
-def _seqs(lengths, styles, clips, mirrored=None):
+def _seqs(lengths, styles, clips, mirrored=None, speeds=None):
     mirrored = mirrored or [False] * len(lengths)
-    return [types.SimpleNamespace(frames=n, style=s, clip=c, mirrored=mi, speed=1.0)
-            for n, s, c, mi in zip(lengths, styles, clips, mirrored)]
+    speeds = speeds or [1.0] * len(lengths)
+    return [types.SimpleNamespace(frames=n, style=s, clip=c, mirrored=mi, speed=v)
+            for n, s, c, mi, v in zip(lengths, styles, clips, mirrored, speeds)]
 
 
 @settings(max_examples=60, deadline=None)
@@ -96,9 +97,11 @@ def _seqs(lengths, styles, clips, mirrored=None):
 def test_style_window_modes(frames, window, smin, extra, seed):
     smax = smin + extra
     rng = np.random.default_rng(seed)
-    # y.bvh is x.bvh's same-style other clip; its mirror (index 3) is another variant and never chosen
-    seqs = _seqs([frames, frames + 7, 300, frames + 7], ["a", "a", "b", "a"], ["x.bvh", "y.bvh", "z.bvh", "y.bvh"],
-                 [False, False, False, True])
+    # y.bvh is x.bvh's same-style other clip; its mirror (index 3) and its sped-up copy (index 4) are other
+    # variants and never chosen
+    seqs = _seqs([frames, frames + 7, 300, frames + 7, frames + 7], ["a", "a", "b", "a", "a"],
+                 ["x.bvh", "y.bvh", "z.bvh", "y.bvh", "y.bvh"], [False, False, False, True, False],
+                 [1.0, 1.0, 1.0, 1.0, 1.1])
     if frames >= window + smin:  # disjoint: the target lies outside the style window
         t0, (j, s0, m) = zdata.style_window(seqs, 0, rng, window=window, style_min=smin, style_max=smax,
                                         sampling="disjoint")

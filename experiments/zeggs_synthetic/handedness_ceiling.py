@@ -67,19 +67,12 @@ def raw_pair_by_content(workdir, data) -> dict:
     from jaxgest.motion.datasets import load_folder
     from jaxgest.zeggs import probes
     from jaxgest.zeggs.inference import load_model
-    from probe_confusion import fold_predictions
 
     model = load_model(workdir)
     clips = [c for d in data for c in load_folder(d)]
     labels, contents = [c.style for c in clips], [c.content for c in clips]
-    n = max(int(PROBE_WINDOW_S * model.cfg.model.fps), model.cfg.model.style_min_frames)
-    stride = int(PROBE_STRIDE_S * model.cfg.model.fps)
-    raws = []
-    for c in clips:
-        f = model.style_features(c.motion)
-        x = np.stack([f[s:s + n] for s in probes._window_starts(len(f), n, stride)])
-        raws.append(np.concatenate([x.mean(1), x.std(1)], axis=1))
-    preds = fold_predictions(raws, labels, contents)
+    raws = [probes.statistics_windows(model, c, PROBE_WINDOW_S, stride_s=PROBE_STRIDE_S) for c in clips]
+    preds = probes.fold_predictions(raws, labels, contents)
     acc = [np.mean([q == y for q in p]) for p, y in zip(preds, labels)]
     return {c: float(np.mean([a for a, y, k in zip(acc, labels, contents)
                               if k == c and y in ("neutral", "left_handed")])) for c in CONTENTS}

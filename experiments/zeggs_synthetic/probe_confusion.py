@@ -26,23 +26,6 @@ import sys
 import numpy as np
 
 
-def fold_predictions(features, labels, groups) -> list:
-    """Per clip, the labels its windows are predicted, by the probe of ``probes.grouped_probe``."""
-    from jaxgest import metrics
-    from jaxgest.zeggs import probes
-
-    preds = [None] * len(features)
-    for _, train, test in probes.probe_folds(groups):
-        xtr = np.concatenate([features[i] for i in train])
-        ytr = np.concatenate([[labels[i]] * len(features[i]) for i in train])
-        pred = metrics.linear_probe_predict(xtr, ytr, np.concatenate([features[i] for i in test]))
-        k = 0
-        for i in test:
-            preds[i] = list(pred[k:k + len(features[i])])
-            k += len(features[i])
-    return preds
-
-
 def confusion_table(preds, labels, styles) -> np.ndarray:
     """Row = true style, column = predicted style, window counts."""
     idx = {s: k for k, s in enumerate(styles)}
@@ -108,16 +91,14 @@ def main(argv=None) -> int:
     clips = [c for d in args.data for c in load_folder(d)]
     labels, contents = [c.style for c in clips], [c.content for c in clips]
     styles = sorted(set(labels))
-    fe = [model.style_features(c.motion) for c in tqdm(clips, desc="pose features", leave=False)]
-    n = max(int(probes.PROBE_WINDOW_S * model.cfg.model.fps), model.cfg.model.style_min_frames)
-    stride = int(probes.PROBE_STRIDE_S * model.cfg.model.fps)
-    xs = [np.stack([f[s:s + n] for s in probes._window_starts(len(f), n, stride)]) for f in fe]
+    xs = [probes._windows(model, c, probes.PROBE_WINDOW_S, probes.PROBE_STRIDE_S)  # the probe's own windows
+          for c in tqdm(clips, desc="windows", leave=False)]
     mus = [np.asarray(m, np.float64) for m in probes.encode_windows(model, xs)]
     raws = [np.concatenate([x.mean(1), x.std(1)], axis=1) for x in xs]
     out = {"workdir": str(args.workdir), "clips": len(clips), "window_s": probes.PROBE_WINDOW_S, "styles": {}}
     per = {}
     for name, feats in (("embedding", mus), ("raw_statistics", raws)):
-        preds = fold_predictions(feats, labels, contents)
+        preds = probes.fold_predictions(feats, labels, contents)
         per[name] = np.array([np.mean([q == y for q in p]) for p, y in zip(preds, labels)])
         out[f"confusion_{name}"] = {"styles": styles, "counts": confusion_table(preds, labels, styles).tolist()}
     print(f"{args.workdir}: {len(clips)} clips; style probe embedding {per['embedding'].mean():.3f}, "

@@ -124,6 +124,23 @@ def unit_means(per_clip, units) -> tuple[list, list]:
     return names, [float(per_clip[[i for i, u in enumerate(units) if u == n]].mean()) for n in names]
 
 
+def fold_predictions(features, labels, groups) -> list:
+    """Per clip, the labels its windows are predicted by the leave-one-group-out probe of
+    :func:`grouped_probe` (one :func:`jaxgest.metrics.linear_probe_predict` fit per :func:`probe_folds`
+    fold, on the windows of the clips of all other groups)."""
+    labels = list(labels)
+    preds = [None] * len(features)
+    for _, train, test in probe_folds(groups):
+        xtr = np.concatenate([features[i] for i in train])
+        ytr = np.concatenate([[labels[i]] * len(features[i]) for i in train])
+        pred = metrics.linear_probe_predict(xtr, ytr, np.concatenate([features[i] for i in test]))
+        k = 0
+        for i in test:
+            preds[i] = list(pred[k:k + len(features[i])])
+            k += len(features[i])
+    return preds
+
+
 def grouped_probe(features, labels, groups, units=None) -> dict:
     """Leave-one-group-out linear probe (:func:`jaxgest.metrics.linear_probe_predict`, one fit per fold).
 
@@ -138,20 +155,10 @@ def grouped_probe(features, labels, groups, units=None) -> dict:
     not be independent.
     """
     labels, groups = list(labels), list(groups)
-    per_clip = np.zeros(len(features))
-    correct = total = 0
-    for _, train, test in probe_folds(groups):
-        xtr = np.concatenate([features[i] for i in train])
-        ytr = np.concatenate([[labels[i]] * len(features[i]) for i in train])
-        pred = metrics.linear_probe_predict(xtr, ytr, np.concatenate([features[i] for i in test]))
-        k = 0
-        for i in test:
-            n = len(features[i])
-            right = int(sum(p == labels[i] for p in pred[k:k + n]))
-            per_clip[i] = right / n
-            correct += right
-            total += n
-            k += n
+    preds = fold_predictions(features, labels, groups)
+    right = [sum(p == y for p in ps) for ps, y in zip(preds, labels)]
+    per_clip = np.array([r / len(ps) for r, ps in zip(right, preds)], np.float64)
+    correct, total = int(sum(right)), int(sum(len(ps) for ps in preds))
     out = {"accuracy": float(correct / total), "per_clip": per_clip.tolist(), "clip_mean": _mean_se(per_clip),
            "chance": 1.0 / len(set(labels)), "clips": len(features), "windows": int(total),
            "folds": len(set(groups))}

@@ -16,14 +16,18 @@ def register(subparsers) -> None:
     p.add_argument("--seconds", type=float, default=10.0, help="clip length in seconds")
     p.set_defaults(func=_synth)
 
-    r = subparsers.add_parser("render", help="stick-figure GIF (or PNG still) of BVH files, side by side")
+    r = subparsers.add_parser("render", help="3D HTML viewer, stick-figure GIF or PNG still of BVH files, side by side")
     r.add_argument("inputs", nargs="+", metavar="IN.bvh")
-    r.add_argument("--out", required=True, help="output .gif (or .png with --png)")
+    r.add_argument("--out", required=True,
+                   help="output .html (self-contained 3D viewer), .gif (animation) or .png (still; also --png)")
     r.add_argument("--titles", default=None, help="comma-separated panel titles (default: file stems)")
     r.add_argument("--png", action="store_true", help="write a still of the middle frame instead")
     r.add_argument("--frame", type=int, default=None, help="frame of the --png still")
     r.add_argument("--fps", type=float, default=None, help="GIF frame rate (default min(clip fps, 20))")
     r.add_argument("--max-seconds", type=float, default=None, help="render at most this many seconds")
+    r.add_argument("--overlay", action="store_true", help="HTML: start with the clips overlaid in one panel")
+    r.add_argument("--trails", type=float, default=None, metavar="SECONDS",
+                   help="HTML: start with hand trajectories over the last SECONDS shown")
     r.set_defaults(func=_render)
 
 
@@ -35,10 +39,20 @@ def _synth(args) -> int:
     return 0
 
 
+OUT_KINDS = {".html": "html", ".htm": "html", ".gif": "gif", ".png": "png"}
+
+
 def _render(args) -> int:
     from jaxgest.motion import bvh
     from jaxgest.render import render_gif, render_png
 
+    suffix = pathlib.Path(args.out).suffix.lower()
+    kind = OUT_KINDS.get(suffix)
+    if kind is None:
+        raise DataError(f"{args.out}: unknown output type {suffix or '(no extension)'!r}; "
+                        "use .html (3D viewer), .gif (animation) or .png (still)")
+    if args.png and kind != "png":
+        raise DataError(f"{args.out}: --png writes a PNG still; name the output .png")
     motions = []
     for path in args.inputs:
         if not pathlib.Path(path).is_file():
@@ -47,7 +61,12 @@ def _render(args) -> int:
     titles = args.titles.split(",") if args.titles else [pathlib.Path(p).stem for p in args.inputs]
     if len(titles) != len(motions):
         raise DataError(f"--titles has {len(titles)} entries for {len(motions)} input files")
-    if args.png:
+    if kind == "html":
+        from jaxgest.viewer import render_html
+
+        out = render_html(motions, args.out, titles=titles, overlay=args.overlay, trails=args.trails is not None,
+                          trail_seconds=1.0 if args.trails is None else args.trails)
+    elif kind == "png":
         out = render_png(motions, args.out, frame=args.frame, titles=titles)
     else:
         out = render_gif(motions, args.out, titles=titles, fps=args.fps, max_seconds=args.max_seconds)

@@ -19,6 +19,7 @@ import pathlib
 import select
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 
@@ -54,20 +55,19 @@ class Browser:
         self.profile = tempfile.TemporaryDirectory(prefix="jaxgest-chromium-")
         to_browser_r, self._to_browser = os.pipe()
         self._from_browser, from_browser_w = os.pipe()
-        # the browser reads commands on its fd 3 and writes replies on its fd 4 (set up by a shell's redirections)
-        r3, w4 = (fcntl.fcntl(fd, fcntl.F_DUPFD, 5) for fd in (to_browser_r, from_browser_w))  # 5-9 (sh)
+        # the browser reads commands on its fd 3 and writes replies on its fd 4: a Python trampoline puts the
+        # pipe ends there and execs the browser (no shell: sh cannot redirect descriptors above 9)
+        r3, w4 = (fcntl.fcntl(fd, fcntl.F_DUPFD, 5) for fd in (to_browser_r, from_browser_w))  # not 3 or 4
         os.close(to_browser_r)
         os.close(from_browser_w)
-        if max(r3, w4) > 9:
-            os.close(r3)
-            os.close(w4)
-            raise BrowserError(f"no free file descriptor below 10 for the browser pipe (got {r3}, {w4})")
-        args = ["/bin/sh", "-c", f'exec "$@" 3<&{r3} 4>&{w4} {r3}<&- {w4}>&-', "sh", self.binary, "--headless", "--remote-debugging-pipe", "--no-sandbox", "--disable-gpu",
+        trampoline = ("import os, sys; os.dup2(int(sys.argv[1]), 3); os.dup2(int(sys.argv[2]), 4); "
+                      "os.close(int(sys.argv[1])); os.close(int(sys.argv[2])); os.execv(sys.argv[3], sys.argv[3:])")
+        args = [sys.executable, "-S", "-c", trampoline, str(r3), str(w4),
+                self.binary, "--headless", "--remote-debugging-pipe", "--no-sandbox", "--disable-gpu",
                 "--no-first-run", "--no-default-browser-check", "--disable-extensions",
                 "--disable-background-networking", "--disable-sync", "--disable-component-update",
                 "--hide-scrollbars", "--mute-audio", "--force-device-scale-factor=1",
                 f"--window-size={width},{height}", f"--user-data-dir={self.profile.name}", "about:blank"]
-
         self.proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                      stderr=subprocess.DEVNULL, pass_fds=(r3, w4))
         os.close(r3)
@@ -128,6 +128,7 @@ class Browser:
         return r.get("result", {}).get("value")
 
     def open(self, url, ready="document.documentElement.getAttribute('data-ready') === '1'"):
+        self.send("Page.navigate", {"url": "about:blank"})  # so a new #hash on the same page loads it anew
         self.send("Page.navigate", {"url": url})
         deadline = time.monotonic() + self.timeout
         while time.monotonic() < deadline:

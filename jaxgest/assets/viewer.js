@@ -440,6 +440,7 @@
     }, { passive: false });
   }
   window.addEventListener("resize", resize);
+  window.addEventListener("hashchange", function () { location.reload(); });  // a new #t=... applies at once
 
   // ---------------------------------------------------------------- loop
   var prev = null;

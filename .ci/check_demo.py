@@ -1,18 +1,22 @@
 """CI check of `jaxgest demo` outputs: every GIF has more than one frame, every BVH loads in an independent
-parser (tests/bvh_testing.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK, and
-metrics.json holds finite numbers."""
+parser (tests/bvh_testing.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK,
+the HTML viewer pages are there, self-contained, with their panels' clips as the BVH files (and, when headless
+Chromium is installed, draw without a JavaScript error or a request), and metrics.json holds finite numbers."""
 
 import json
 import math
 import pathlib
+import re
 import sys
 
 import numpy as np
 from PIL import Image
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+from browser_testing import Browser, find_chromium  # noqa: E402
 from bvh_testing import reference_fk  # noqa: E402
 
+from jaxgest import viewer  # noqa: E402
 from jaxgest.motion import bvh, kinematics  # noqa: E402
 
 out = pathlib.Path(sys.argv[1])
@@ -26,6 +30,34 @@ for f in files:
     mine = kinematics.forward_kinematics(bvh.load(f))
     assert np.abs(ref - mine).max() < 1e-3, f
 report = json.loads((out / "metrics.json").read_text())
+
+# the HTML viewer pages: listed in the summary, self-contained, each clip as its BVH file
+PAGES = {"transfer_energetic.html": ["content (neutral)", "style (energetic)", "soft", "hard", "adain", "avatarnet",
+                                     "ground truth"],
+         "transfer_sad.html": None, "speech_styles.html": ["energetic", "sad", "blend 50/50"],
+         "pipeline.html": ["ZeroEGGS (neutral)", "+ TGST (energetic)", "style exemplar"]}
+assert sorted(report["pages"]) == sorted(PAGES), report["pages"]
+for name, titles in PAGES.items():
+    page = (out / "results" / name).read_text()
+    assert "default-src 'none'" in page and not re.search(r"<(script|link|img)[^>]*\s(src|href)=", page), name
+    data = json.loads(re.search(r'<script type="application/json" id="jaxgest-data">(.*?)</script>', page, re.S)[1])
+    assert titles is None or [c["title"] for c in data["clips"]] == titles, (name, [c["title"] for c in data["clips"]])
+    assert all(c["frames"] > 1 and c["fps"] > 0 for c in data["clips"]), name
+energetic = json.loads(re.search(r'id="jaxgest-data">(.*?)</script>',
+                                 (out / "results/transfer_energetic.html").read_text(), re.S)[1])["clips"]
+soft = viewer.decode_clip(energetic[2])  # the soft transfer's panel is results/transfer_energetic_soft.bvh
+want = kinematics.forward_kinematics(bvh.load(out / "results/transfer_energetic_soft.bvh")) * viewer.CM_TO_M
+assert np.abs(soft - want).max() < 1e-4, "transfer_energetic.html: soft panel differs from its BVH"
+if find_chromium():  # drawn in a real browser: no JavaScript error, no request but the page
+    for name in PAGES:
+        url = (out / "results" / name).resolve().as_uri()
+        with Browser() as b:
+            b.open(url + "#t=1&paused=1")
+            b.next_frame()
+            assert b.js_errors() == [] and {u.split("#")[0] for u in b.requests()} <= {url}, name
+    browser = "drawn in headless Chromium"
+else:
+    browser = "not drawn: no headless Chromium"
 
 
 def finite(x):
@@ -52,5 +84,5 @@ for task in ("style", "content"):
         assert 0.0 <= probe[task][k]["accuracy"] <= 1.0 and probe[task][k]["ci95_half_width"] >= 0.0, (task, k)
 lk = gen["leakage"]["contrasts"]  # and the leakage contrast (same style vs another style)
 assert {"other_style - same_style_other_content", "zero - same_style_other_content"} <= set(lk), lk
-print(f"demo outputs ok: {len(gifs)} GIFs, {len(files)} BVH files (independent parser), metrics.json "
-      f"({report['timings_s']['total_s']:.0f} s)")
+print(f"demo outputs ok: {len(gifs)} GIFs, {len(files)} BVH files (independent parser), {len(PAGES)} HTML pages "
+      f"({browser}), metrics.json ({report['timings_s']['total_s']:.0f} s)")

@@ -200,3 +200,101 @@ def render_html(
     with atomic_output(out) as tmp:
         pathlib.Path(tmp).write_text(text, encoding="utf-8")
     return out
+
+
+# ------------------------------------------------------------------------------------------------------
+# pages of evaluation cases (``jaxgest tgst evaluate --html DIR``, ``jaxgest zeggs evaluate --html DIR``)
+
+CASES = ("best", "median", "worst")
+
+
+def best_median_worst(items: Sequence, scores: Sequence[float]) -> list:
+    """``[("best", item), ("median", item), ("worst", item)]``: the items of the lowest, the median (lower
+    median) and the highest score (lower is better). Fewer distinct items give fewer cases."""
+    if len(items) != len(scores):
+        raise ValueError("best_median_worst: one score per item")
+    if not items:
+        return []
+    order = [int(i) for i in np.argsort(np.asarray(scores, np.float64), kind="stable")]
+    picks = [order[0], order[(len(order) - 1) // 2], order[-1]]
+    out, seen = [], set()
+    for label, i in zip(CASES, picks):
+        if i not in seen:
+            seen.add(i)
+            out.append((label, items[i]))
+    return out
+
+
+def prepare_html_dir(path) -> pathlib.Path:
+    """The ``--html DIR`` folder, created when its parent exists (checked before any long computation)."""
+    d = pathlib.Path(path)
+    if d.exists() and not d.is_dir():
+        raise DataError(f"{d}: --html needs a folder, and this is a file")
+    if not d.parent.is_dir():
+        raise DataError(f"{d}: --html folder's parent {d.parent} does not exist")
+    d.mkdir(exist_ok=True)
+    return d
+
+
+def tgst_evaluation_pages(report: dict, model, clips, out_dir) -> list:
+    """Viewer pages of the best, median and worst pairs of a ``jaxgest tgst evaluate`` report.
+
+    A pair's score is the first evaluated method's content error plus its style error, each divided by its
+    median over the evaluated pairs (the two are in different units). Each page shows content | style |
+    every method's result (transferred again with ``model``; titles carry the report's errors) | ground
+    truth. ``clips``: the dataset's clips (:func:`jaxgest.motion.datasets.load_folder`), matched by path.
+    """
+    out_dir = pathlib.Path(out_dir)
+    methods = list(report["methods"])
+    first = methods[0]
+    rows = [r for r in report["per_pair"] if "content" in r["errors"].get(first, {})]
+    if not rows:
+        raise DataError(f"--html: no evaluated pair (every {first} transfer was skipped)")
+    ce = np.array([r["errors"][first]["content"]["mean"] for r in rows])
+    se = np.array([r["errors"][first]["style"]["mean"] for r in rows])
+    score = ce / max(float(np.median(ce)), 1e-12) + se / max(float(np.median(se)), 1e-12)
+    by_path = {str(c.path): c for c in clips}
+    written = []
+    for label, rec in best_median_worst(rows, list(score)):
+        content, style = by_path[rec["content"]].motion, by_path[rec["style"]].motion
+        panels, titles = [content, style], ["content", f"style ({rec['style_label']})"]
+        for m in methods:
+            e = rec["errors"].get(m, {})
+            panels.append(model.transfer(content, style, method=m))
+            titles.append(f"{m}: {e['content']['mean']:.3f} m, {e['style']['mean']:.3f} m/s" if "content" in e
+                          else f"{m} (skipped)")
+        if rec.get("ground_truth"):
+            panels.append(by_path[rec["ground_truth"]].motion)
+            titles.append("ground truth")
+        heading = (f"{label} pair ({first}): {pathlib.Path(rec['content']).stem} in the style of "
+                   f"{pathlib.Path(rec['style']).stem}")
+        written.append(render_html(panels, out_dir / f"{label}.html", titles=titles, heading=heading))
+    return written
+
+
+def zeggs_evaluation_pages(result: dict, model, clips, out_dir, *, seed: int = 0) -> list:
+    """Viewer pages of the best, median and worst test clips of a ``jaxgest zeggs evaluate`` result, ranked
+    by the generated motion's BeatAlign minus its shuffled control (higher is better). Each page shows the
+    motion generated from the clip's audio with its style example (generated again with ``model`` and the
+    evaluation's seed) | the real clip | the style example, with the hand trajectories on."""
+    from jaxgest.motion.datasets import load_clip_audio
+
+    out_dir = pathlib.Path(out_dir)
+    rows = result.get("beat_alignment", {}).get("per_clip") or []
+    if not rows:
+        raise DataError("--html: no generated test clip to show (generation skipped or no clip scored)")
+    by_path = {str(c.path): c for c in clips}
+    gain = [r["generated"]["aligned"] - r["generated"]["shuffled"] for r in rows]
+    written = []
+    for label, rec in best_median_worst(rows, [-g for g in gain]):
+        clip, example = by_path[rec["clip"]], by_path[rec["style_example"]]
+        audio, sr = load_clip_audio(clip)
+        gen = model.generate(audio, [example.motion], sr=sr, seed=seed, name=f"{clip.path.stem}_gen")
+        g, r = rec["generated"], rec["real"]
+        titles = [f"generated: BeatAlign {g['aligned']:.3f} (shuffled {g['shuffled']:.3f})",
+                  f"real: {r['aligned']:.3f} (shuffled {r['shuffled']:.3f})",
+                  f"style example ({example.style})"]
+        heading = f"{label} clip: {clip.path.stem} ({clip.style})"
+        written.append(render_html([gen, clip.motion, example.motion], out_dir / f"{label}.html", titles=titles,
+                                   heading=heading, trails=True))
+    return written

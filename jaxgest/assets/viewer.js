@@ -101,6 +101,7 @@
   bbLo[1] = Math.min(bbLo[1], 0);
   var FOV = 35 * Math.PI / 180;
   var radius = 0.5 * Math.max(bbHi[0] - bbLo[0], bbHi[1] - bbLo[1], bbHi[2] - bbLo[2], 0.5);
+  var SLENDER = Math.max(1, Math.min(2.2, (bbHi[1] - bbLo[1]) / Math.max(bbHi[0] - bbLo[0], bbHi[2] - bbLo[2], 0.1)));
   var HOME = { yaw: 25 * Math.PI / 180, pitch: 10 * Math.PI / 180, dist: 1.2 * radius / Math.tan(FOV / 2),
                target: [(bbLo[0] + bbHi[0]) / 2, (bbLo[1] + bbHi[1]) / 2, (bbLo[2] + bbHi[2]) / 2] };
   var cam = { yaw: HOME.yaw, pitch: HOME.pitch, dist: HOME.dist, target: HOME.target.slice() };
@@ -144,7 +145,8 @@
   var NEAR = 0.05;
   function View(canvas) {
     var b = basis(), w = canvas.width, h = canvas.height;
-    var focal = 0.5 * Math.min(w, h) / Math.tan(FOV / 2);
+    // fit the clips' height in a tall, narrow panel too: a standing body is about twice as tall as it is wide
+    var focal = 0.5 * Math.min(h, w * SLENDER) / Math.tan(FOV / 2);
     var toCam = function (p) {
       var v = [p[0] - b.eye[0], p[1] - b.eye[1], p[2] - b.eye[2]];
       return [v[0] * b.right[0] + v[1] * b.right[1] + v[2] * b.right[2],
@@ -278,8 +280,8 @@
       for (var f = f0; f < f1; f++) {
         var s = view.seg(P(clip, f, j), P(clip, f + 1, j));
         if (!s) continue;
-        ctx.globalAlpha = 0.15 + 0.75 * (f - f0 + 1) / (f1 - f0);
-        line(ctx, s, col, 1.5 * scale);
+        ctx.globalAlpha = 0.3 + 0.7 * (f - f0 + 1) / (f1 - f0);
+        line(ctx, s, col, 2 * scale);
       }
       ctx.globalAlpha = 1;
     });

@@ -9,7 +9,9 @@ The demo runs everything on the built-in synthetic data, with no download and no
 4. generates gestures from a synthetic speech WAV in two styles and a 50/50 blend, with beat alignment
    against a shuffled-onset control, and the style-probe accuracy of the ZEGGS style embeddings;
 5. runs the chained pipeline (speech -> ZEGGS in the neutral style -> TGST to an expressive style);
-6. writes BVH files, side-by-side GIFs with titles, ``metrics.json`` and prints a summary table.
+6. writes BVH files, side-by-side GIFs with titles and a self-contained 3D HTML viewer page beside each GIF
+   (:mod:`jaxgest.viewer`; whole clips, not only the GIF's first seconds), ``metrics.json`` and prints a
+   summary table naming the pages.
 
 ``--quick`` (CI smoke test, about 2 minutes on 2 cores) uses 2 contents x 7 styles of 6 s and few training
 steps; the default (about 10 minutes) uses all 6 contents x 7 styles of 10 s and longer training. The tiny
@@ -117,6 +119,7 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     from jaxgest.motion.synthetic import write_dataset
     from jaxgest.pipeline import speech_to_styled_gestures
     from jaxgest.render import render_gif
+    from jaxgest.viewer import render_html
     from jaxgest.tgst import evaluate as tev
     from jaxgest.tgst.api import load_model as load_tgst
     from jaxgest.tgst.train import train as train_tgst
@@ -131,6 +134,7 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     data, results = out / "data", out / "results"
     results.mkdir(exist_ok=True)
     timings, t_all = {}, time.perf_counter()
+    pages = []  # the HTML viewer pages written into results/
 
     def step(name):
         if progress:
@@ -175,6 +179,9 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
         panels.append(truth)
         titles.append("ground truth")
         render_gif(panels, results / f"transfer_{style_name}.gif", titles=titles, max_seconds=plan["gif_seconds"])
+        render_html(panels, results / f"transfer_{style_name}.html", titles=titles,
+                    heading=f"style transfer: '{CONTENT}' ({NEUTRAL}) -> {style_name}")
+        pages.append(f"transfer_{style_name}.html")
         transfer[style_name] = per_method
     timings["transfer_s"] = time.perf_counter() - t
 
@@ -196,6 +203,9 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
         generated.append(m)
     render_gif(generated, results / "speech_styles.gif", titles=[STYLES[0], STYLES[1], "blend 50/50"],
                max_seconds=plan["gif_seconds"])
+    render_html(generated, results / "speech_styles.html", titles=[STYLES[0], STYLES[1], "blend 50/50"],
+                heading=f"ZeroEGGS: '{OTHER_CONTENT}' speech in {', '.join(STYLES)} and a 50/50 blend", trails=True)
+    pages.append("speech_styles.html")
     clips = load_folder(data)
     try:  # the probe beside its controls (random-init encoder, raw window statistics) on the same folds
         probe = zev.probe(zeggs, clips)
@@ -220,9 +230,12 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
                                                           seed=seed, sr=sr)
     bvh.save(zeggs_out, results / "pipeline_zeggs_neutral.bvh")
     bvh.save(styled, results / f"pipeline_{STYLES[0]}.bvh")
-    render_gif([zeggs_out, styled, exemplar], results / "pipeline.gif",
-               titles=[f"ZeroEGGS ({NEUTRAL})", f"+ TGST ({STYLES[0]})", "style exemplar"],
+    pipeline_titles = [f"ZeroEGGS ({NEUTRAL})", f"+ TGST ({STYLES[0]})", "style exemplar"]
+    render_gif([zeggs_out, styled, exemplar], results / "pipeline.gif", titles=pipeline_titles,
                max_seconds=plan["gif_seconds"])
+    render_html([zeggs_out, styled, exemplar], results / "pipeline.html", titles=pipeline_titles,
+                heading=f"pipeline: speech -> ZeroEGGS ({NEUTRAL}) -> TGST ({STYLES[0]})")
+    pages.append("pipeline.html")
     pipe = {"frames": styled.num_frames, "fps": styled.fps, **ptimes}
     try:
         pipe["beat_alignment"] = zev.beat_scores(styled, audio, sr, seed=seed)
@@ -239,6 +252,7 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
         "generation": {"beat_alignment": gen_metrics, "style_probe": probe, "leakage": leakage},
         "pipeline": pipe,
         "timings_s": timings,
+        "pages": pages,
         "notes": {
             "errors": "mean over frames; content = DTW hand error (m) vs the content clip, style = arm-velocity "
                       "window statistics error (m/s) vs the style clip, gt_* = vs the ground-truth clip; "
@@ -256,6 +270,9 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     if progress:
         print(summary_table(report))
         print(f"\nwrote {results}/*.bvh, *.gif and {out / 'metrics.json'} in {timings['total_s']:.0f} s")
+        print("3D viewer pages (open in a browser; no network needed):")
+        for name in pages:
+            print(f"  {results / name}")
     return report
 
 

@@ -79,6 +79,11 @@ def _evaluate(args) -> int:
     from jaxgest.training import write_json_atomic
 
     check_output_path(args.json)
+    html_dir = None
+    if args.html:
+        from jaxgest.viewer import prepare_html_dir
+
+        html_dir = prepare_html_dir(args.html)
     methods = None if args.methods is None else tuple(m.strip() for m in args.methods.split(",") if m.strip())
     contents = None if args.contents is None else [c.strip() for c in args.contents.split(",") if c.strip()]
     report = evaluate(
@@ -124,6 +129,14 @@ def _evaluate(args) -> int:
     if args.validity:
         print()
         print(validity_table(report["metric_validity"]))
+    if html_dir is not None:
+        from jaxgest.motion.datasets import load_folder
+        from jaxgest.tgst.api import load_model
+        from jaxgest.viewer import tgst_evaluation_pages
+
+        pages = tgst_evaluation_pages(report, load_model(args.workdir), load_folder(args.data, progress=False),
+                                      html_dir)
+        print("\n3D viewer pages: " + ", ".join(str(p) for p in pages))
     return 0
 
 
@@ -157,4 +170,7 @@ def register_evaluate(tgst_subparsers) -> None:
         action="store_true",
         help="also compute the metric-validity table (paper Table 1) of the data (inter pairs for --pairs intra)",
     )
+    p.add_argument("--html", default=None, metavar="DIR",
+                   help="also write 3D viewer pages of the best, median and worst pairs (DIR/best.html, ...; "
+                   "ranked by the first method's content + style error, each over its median)")
     p.set_defaults(func=_evaluate)

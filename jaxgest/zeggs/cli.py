@@ -6,7 +6,7 @@ import json
 import pathlib
 
 from jaxgest.cli import add_train_arguments, training_data
-from jaxgest.errors import JaxgestError
+from jaxgest.errors import DataError, JaxgestError
 
 
 def register(subparsers) -> None:
@@ -65,6 +65,9 @@ def register(subparsers) -> None:
                    "in a temporary folder) pooled with --probe-data")
     e.add_argument("--no-generation", action="store_true",
                    help="probes and leakage only (skip beat alignment and the Fréchet distance)")
+    e.add_argument("--html", default=None, metavar="DIR",
+                   help="also write 3D viewer pages of the best, median and worst generated test clips "
+                   "(DIR/best.html, ...; ranked by BeatAlign minus its shuffled control)")
     e.set_defaults(func=_evaluate)
 
 
@@ -177,9 +180,24 @@ def _evaluate(args) -> int:
     from jaxgest.zeggs.evaluate import evaluate, markdown
 
     out = check_output_path(args.json)
+    html_dir = None
+    if args.html:
+        from jaxgest.viewer import prepare_html_dir
+
+        if args.no_generation:
+            raise DataError("--html shows generated clips; it cannot go with --no-generation")
+        html_dir = prepare_html_dir(args.html)
     result = evaluate(args.workdir, args.data, seed=args.seed, max_clips=args.max_clips,
                       probe_data=args.probe_data, probe_seeds=args.probe_seeds,
                       generation=not args.no_generation)
     write_text_atomic(out, json.dumps(result, indent=2) + "\n")
     print(markdown(result))
+    if html_dir is not None:
+        from jaxgest.motion.datasets import load_folder
+        from jaxgest.viewer import zeggs_evaluation_pages
+        from jaxgest.zeggs.inference import load_model
+
+        pages = zeggs_evaluation_pages(result, load_model(args.workdir), load_folder(args.data), html_dir,
+                                       seed=args.seed)
+        print("\n3D viewer pages: " + ", ".join(str(p) for p in pages))
     return 0

@@ -149,15 +149,18 @@ def evaluate(workdir, data_dir, *, seed: int = 0, max_clips: Optional[int] = Non
     test = test[:max_clips] if max_clips else test
     if not test:
         raise DataError(f"{data_dir}: no test clip with audio for beat alignment")
-    gen_scores, real_scores, gen_feats, real_feats = [], [], [], []
+    gen_scores, real_scores, gen_feats, real_feats, per_clip = [], [], [], [], []
     for c in tqdm(test, desc="zeggs evaluate", disable=not progress, leave=False):
         audio, sr = load_clip_audio(c)
-        gen = model.generate(audio, [style_example(c, train).motion], sr=sr, seed=seed, name=f"{c.path.stem}_gen")
+        example = style_example(c, train)
+        gen = model.generate(audio, [example.motion], sr=sr, seed=seed, name=f"{c.path.stem}_gen")
         try:
             gen_scores.append(beat_scores(gen, audio, sr, seed=seed))
             real_scores.append(beat_scores(c.motion, audio, sr, seed=seed))
         except DataError:
             continue  # a clip without kinematic beats has no defined score
+        per_clip.append({"clip": str(c.path), "style_example": str(example.path), "generated": gen_scores[-1],
+                         "real": real_scores[-1]})
         gen_feats.append(motion_statistics_features(gen))
         real_feats.append(motion_statistics_features(c.motion))
     if not gen_scores:
@@ -170,7 +173,7 @@ def evaluate(workdir, data_dir, *, seed: int = 0, max_clips: Optional[int] = Non
         "generated": mean(gen_scores, "aligned"), "generated_shuffled": mean(gen_scores, "shuffled"),
         "real": mean(real_scores, "aligned"), "real_shuffled": mean(real_scores, "shuffled"),
         "generated_vs_control": paired_difference(gen_scores), "real_vs_control": paired_difference(real_scores),
-        "clips": len(gen_scores), "sigma_s": 0.1,
+        "clips": len(gen_scores), "sigma_s": 0.1, "per_clip": per_clip,
     }
     real_test = np.concatenate(real_feats)
     result["frechet_distance"] = {

@@ -358,7 +358,7 @@
     root.setAttribute("data-time", state.t.toFixed(6));
   }
   function writeStatus() {
-    if (!statusEl || !clips) return;
+    if (!statusEl || !clips || !state) return;  // an error before the page is set up: data-errors tells
     statusEl.textContent = JSON.stringify(info());
   }
   function info() {
@@ -401,7 +401,9 @@
   el("camFront").addEventListener("click", function () { setCam(0, 0, true); });
   el("camSide").addEventListener("click", function () { setCam(Math.PI / 2, 0, true); });
   document.addEventListener("keydown", function (e) {
-    if (e.target && (e.target.tagName === "INPUT" && e.target.type === "number" || e.target.tagName === "SELECT")) return;
+    var tag = e.target && e.target.tagName, type = e.target && e.target.type;
+    if (tag === "SELECT" || (tag === "INPUT" && type === "number")) return;  // their own keys
+    if (e.key === " " && (tag === "BUTTON" || (tag === "INPUT" && type === "checkbox"))) return;  // their click
     if (e.key === "ArrowRight") { step(1); e.preventDefault(); }
     else if (e.key === "ArrowLeft") { step(-1); e.preventDefault(); }
     else if (e.key === " ") { playBtn.click(); e.preventDefault(); }

@@ -138,3 +138,18 @@ def test_viewer_overlay_side_view_and_trails(page, browser):
         assert _near(crop, tint) > 50, tint
     new = b.events[n_events:]
     assert not [e for e in new if e["method"] == "Runtime.exceptionThrown"]
+
+
+def test_viewer_plays_to_the_end_without_loop(page, browser):
+    """Playback at 2x with loop off advances and stops on the last frame (no timing is asserted)."""
+    path, motions = page
+    b = browser
+    b.open(path.resolve().as_uri() + "#speed=2&loop=0")
+    assert b.evaluate("document.getElementById('speed').value") == "2"
+    done = b.evaluate("new Promise(r => { const t0 = performance.now(); (function wait() {"
+                      " const i = jaxgestViewer.info();"
+                      " if (!i.playing || performance.now() - t0 > 30000) r(i); else setTimeout(wait, 50); })(); })",
+                      await_promise=True)
+    last = max(m.num_frames / m.fps for m in motions) - 1 / max(m.fps for m in motions)
+    assert not done["playing"] and done["time"] == pytest.approx(last, abs=1e-6)
+    assert [c["frame"] for c in done["clips"]] == [m.num_frames - 1 for m in motions]

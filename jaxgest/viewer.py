@@ -69,7 +69,8 @@ def _hands(skeleton) -> list:
         return found
     out = []  # no joint map: the shortest joint name with "hand" on each side
     for side in ("L", "R"):
-        cands = [(len(n), j) for j, n in enumerate(skeleton.names) if "hand" in n.lower() and _side(n) == side]
+        cands = [(len(n), j) for j, n in enumerate(skeleton.names)
+                 if "hand" in n.lower() and _side(n) == side]
         if cands:
             out.append(min(cands)[1])
     return out
@@ -295,6 +296,6 @@ def zeggs_evaluation_pages(result: dict, model, clips, out_dir, *, seed: int = 0
                   f"real: {r['aligned']:.3f} (shuffled {r['shuffled']:.3f})",
                   f"style example ({example.style})"]
         heading = f"{label} clip: {clip.path.stem} ({clip.style})"
-        written.append(render_html([gen, clip.motion, example.motion], out_dir / f"{label}.html", titles=titles,
-                                   heading=heading, trails=True))
+        written.append(render_html([gen, clip.motion, example.motion], out_dir / f"{label}.html",
+                                   titles=titles, heading=heading, trails=True))
     return written

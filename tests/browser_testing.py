@@ -5,8 +5,8 @@ descriptors 3 and 4 of the browser process), so no websocket library and no down
 needed: only the system package (Debian: ``chromium-headless-shell``; also found: ``chromium``,
 ``chromium-browser``, ``google-chrome``, ``headless_shell``, or $CHROMIUM).
 
-Also a tool: ``python tests/browser_testing.py PAGE.html OUT.png [--width W --height H --hash '#t=2']`` saves a
-screenshot of a page (how docs/viewer.png is made).
+Also a tool: ``python tests/browser_testing.py PAGE.html OUT.png [--width W --height H --hash '#t=2']``
+saves a screenshot of a page (how docs/viewer.png is made).
 """
 
 from __future__ import annotations
@@ -61,7 +61,8 @@ class Browser:
         os.close(to_browser_r)
         os.close(from_browser_w)
         trampoline = ("import os, sys; os.dup2(int(sys.argv[1]), 3); os.dup2(int(sys.argv[2]), 4); "
-                      "os.close(int(sys.argv[1])); os.close(int(sys.argv[2])); os.execv(sys.argv[3], sys.argv[3:])")
+                      "os.close(int(sys.argv[1])); os.close(int(sys.argv[2])); "
+                      "os.execv(sys.argv[3], sys.argv[3:])")
         args = [sys.executable, "-S", "-c", trampoline, str(r3), str(w4),
                 self.binary, "--headless", "--remote-debugging-pipe", "--no-sandbox", "--disable-gpu",
                 "--no-first-run", "--no-default-browser-check", "--disable-extensions",
@@ -75,7 +76,8 @@ class Browser:
         self._buf, self._id, self.events, self.session = b"", 0, [], None
         try:
             target = self._call("Target.createTarget", {"url": "about:blank"})["targetId"]
-            self.session = self._call("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+            attached = self._call("Target.attachToTarget", {"targetId": target, "flatten": True})
+            self.session = attached["sessionId"]
             for domain in ("Page", "Runtime", "Network", "Log"):
                 self.send(f"{domain}.enable")
             self.send("Emulation.setDeviceMetricsOverride",
@@ -156,7 +158,8 @@ class Browser:
         return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
 
     def requests(self):
-        return [e["params"]["request"]["url"] for e in self.events if e["method"] == "Network.requestWillBeSent"]
+        return [e["params"]["request"]["url"] for e in self.events
+                if e["method"] == "Network.requestWillBeSent"]
 
     def js_errors(self):
         out = []
@@ -166,7 +169,8 @@ class Browser:
                 d = p["exceptionDetails"]
                 out.append(d.get("exception", {}).get("description") or d.get("text"))
             elif m == "Runtime.consoleAPICalled" and p.get("type") in ("error", "assert"):
-                out.append("console: " + " ".join(str(a.get("value", a.get("description"))) for a in p["args"]))
+                args = (str(a.get("value", a.get("description"))) for a in p["args"])
+                out.append("console: " + " ".join(args))
             elif m == "Log.entryAdded" and p["entry"].get("level") == "error":
                 out.append("log: " + p["entry"].get("text", ""))
         return out

@@ -16,10 +16,12 @@ def register(subparsers) -> None:
     p.add_argument("--seconds", type=float, default=10.0, help="clip length in seconds")
     p.set_defaults(func=_synth)
 
-    r = subparsers.add_parser("render", help="3D HTML viewer, stick-figure GIF or PNG still of BVH files, side by side")
+    r = subparsers.add_parser("render",
+                              help="3D HTML viewer, stick-figure GIF or PNG still of BVH files, side by side")
     r.add_argument("inputs", nargs="+", metavar="IN.bvh")
     r.add_argument("--out", required=True,
-                   help="output .html (self-contained 3D viewer), .gif (animation) or .png (still; also --png)")
+                   help="output .html (self-contained 3D viewer), .gif (animation) or .png (still; --png "
+                   "still works)")
     r.add_argument("--titles", default=None, help="comma-separated panel titles (default: file stems)")
     r.add_argument("--png", action="store_true", help="write a still of the middle frame instead")
     r.add_argument("--frame", type=int, default=None, help="frame of the --png still")
@@ -64,7 +66,8 @@ def _render(args) -> int:
     if kind == "html":
         from jaxgest.viewer import render_html
 
-        out = render_html(motions, args.out, titles=titles, overlay=args.overlay, trails=args.trails is not None,
+        out = render_html(motions, args.out, titles=titles, overlay=args.overlay,
+                          trails=args.trails is not None,
                           trail_seconds=1.0 if args.trails is None else args.trails)
     elif kind == "png":
         out = render_png(motions, args.out, frame=args.frame, titles=titles)

@@ -13,8 +13,8 @@ import json
 
 import numpy as np
 import pytest
-
 from browser_testing import Browser, find_chromium
+
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import resample_motion
 from jaxgest.motion.kinematics import forward_kinematics
@@ -25,7 +25,8 @@ from jaxgest.viewer import CM_TO_M, render_html
 CHROMIUM = find_chromium()
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None,
-    reason="headless Chromium not found (apt-get install chromium-headless-shell; .ci/run installs it when it can)")
+    reason="headless Chromium not found (apt-get install chromium-headless-shell; "
+           ".ci/run installs it when it can)")
 
 WIDTH, HEIGHT = 1200, 560
 
@@ -39,7 +40,8 @@ def page(tmp_path_factory):
     """Three clips of different lengths and frame rates, written as BVH, read back, shown side by side."""
     d = tmp_path_factory.mktemp("viewer")
     made = [render_clip(CONTENTS["greeting"].with_seed(0, 2.0), "neutral", seed=0)[0],
-            resample_motion(render_clip(CONTENTS["directions"].with_seed(0, 3.0), "energetic", seed=0)[0], 30.0),
+            resample_motion(render_clip(CONTENTS["directions"].with_seed(0, 3.0), "energetic", seed=0)[0],
+                            30.0),
             render_clip(CONTENTS["greeting"].with_seed(1, 2.5), "sad", seed=1)[0]]
     motions = []
     for k, m in enumerate(made):
@@ -148,7 +150,8 @@ def test_viewer_plays_to_the_end_without_loop(page, browser):
     assert b.evaluate("document.getElementById('speed').value") == "2"
     done = b.evaluate("new Promise(r => { const t0 = performance.now(); (function wait() {"
                       " const i = jaxgestViewer.info();"
-                      " if (!i.playing || performance.now() - t0 > 30000) r(i); else setTimeout(wait, 50); })(); })",
+                      " if (!i.playing || performance.now() - t0 > 30000) r(i);"
+                      " else setTimeout(wait, 50); })(); })",
                       await_promise=True)
     last = max(m.num_frames / m.fps for m in motions) - 1 / max(m.fps for m in motions)
     assert not done["playing"] and done["time"] == pytest.approx(last, abs=1e-6)

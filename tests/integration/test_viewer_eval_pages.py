@@ -1,5 +1,5 @@
-"""`jaxgest tgst evaluate --html DIR` and `jaxgest zeggs evaluate --html DIR`: viewer pages of the best, median
-and worst cases (jaxgest.viewer.best_median_worst), on the session's tiny models."""
+"""`jaxgest tgst evaluate --html DIR` and `jaxgest zeggs evaluate --html DIR`: viewer pages of the best,
+median and worst cases (jaxgest.viewer.best_median_worst), on the session's tiny models."""
 
 from __future__ import annotations
 
@@ -22,7 +22,8 @@ def _expected(n):
 
 
 def test_best_median_worst():
-    assert best_median_worst(list("abcde"), [3, 1, 5, 2, 4]) == [("best", "b"), ("median", "a"), ("worst", "c")]
+    picked = best_median_worst(list("abcde"), [3, 1, 5, 2, 4])
+    assert picked == [("best", "b"), ("median", "a"), ("worst", "c")]
     assert best_median_worst(["x", "y"], [2, 1]) == [("best", "y"), ("worst", "x")]  # lower median is best
     assert best_median_worst(["x"], [0.5]) == [("best", "x")]
     assert best_median_worst([], []) == []

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+
 import numpy as np
 import pytest
 
@@ -57,7 +58,8 @@ def test_embedded_positions_match_forward_kinematics(clips, case):
         assert np.allclose(got[..., 1], want[..., 1], atol=1e-4)
     assert got.shape == want.shape
     assert np.abs(got - want).max() < 1e-4  # 0.1 mm
-    assert rec["frames"] == m.num_frames and rec["fps"] == m.fps and rec["duration"] == pytest.approx(m.duration)
+    assert rec["frames"] == m.num_frames and rec["fps"] == m.fps
+    assert rec["duration"] == pytest.approx(m.duration)
 
 
 def test_page_is_self_contained_and_labelled(clips, tmp_path):
@@ -117,7 +119,8 @@ def test_render_cli_chooses_by_extension(clips, tmp_path, capsys):
     assert r.returncode == 0 and (tmp_path / "v.gif").read_bytes()[:4] == b"GIF8"
     r = _cli("render", paths[0], "--out", tmp_path / "v.png")
     assert r.returncode == 0 and (tmp_path / "v.png").read_bytes()[:4] == b"\x89PNG"
-    for out, why in (("v.mp4", "unknown output type '.mp4'"), ("noext", "unknown output type '(no extension)'")):
+    for out, why in (("v.mp4", "unknown output type '.mp4'"),
+                     ("noext", "unknown output type '(no extension)'")):
         r = _cli("render", paths[0], "--out", tmp_path / out)
         assert r.returncode == 2 and why in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert not (tmp_path / out).exists()

@@ -5,7 +5,7 @@ tests/conftest.py) and runs it as a subprocess for the multi-process case:
 ``python tests/_parallel_worker.py --devices N --steps K --batch B --seed S --out DIR [--model M ...]`` in a
 process whose ``XLA_FLAGS`` holds ``--xla_force_host_platform_device_count=N`` (set by the parent before this
 interpreter imports jax; ``--host-devices`` sets it here otherwise). For every model it runs
-``K`` steps of :func:`jaxgest.training.train_loop` through :mod:`jaxgest.parallel` and writes
+``K`` steps of :func:`jaxgest.runtime.training.train_loop` through :mod:`jaxgest.runtime.parallel` and writes
 
 * ``DIR/<model>.npz``: the final parameters, keyed by their pytree path (``<model>_init.npz``: initial);
 * ``DIR/<model>/metrics.jsonl``: the MetricsLogger output with the device info as extra fields;
@@ -17,7 +17,7 @@ Registry. ``BUILDERS`` maps a model name to ``builder(seed, batch_size) -> (stat
 ``(state, batch, key) -> (state, metrics)`` with a ``loss`` metric that averages over the batch, and
 ``batch_fn(i)`` the host-global numpy batch pytree of step ``i`` (every leaf ``(batch_size, ...)``), a pure
 function of ``(seed, i)``. Two toys are registered (an MLP and a strided conv net): the mechanism of
-:mod:`jaxgest.parallel` does not depend on the model. The real models are checked through their ``train``
+:mod:`jaxgest.runtime.parallel` does not depend on the model. The real models are checked through their ``train``
 entry points instead (tests/test_parallel.py, against the session's 1-device tiny models). Register another
 builder with ``@register("name")``; the test picks every registered name up through ``--list``.
 """
@@ -69,7 +69,7 @@ def _regression_step(module):
 
 def _init_state(module, tx, seed: int, example):
     """TrainState from ``seed``, initialised inside one jit (eager flax init compiles every op apart)."""
-    from jaxgest.training import TrainState
+    from jaxgest.runtime.training import TrainState
 
     def create(key):
         params = module.init(key, example)["params"]
@@ -150,7 +150,7 @@ def _flat(tree) -> dict:
 
 
 def _error_of(fn):
-    from jaxgest.errors import JaxgestError
+    from jaxgest.runtime.errors import JaxgestError
 
     try:
         fn()
@@ -160,8 +160,8 @@ def _error_of(fn):
 
 
 def run_model(name: str, args, out: pathlib.Path) -> dict:
-    from jaxgest import parallel
-    from jaxgest.training import MetricsLogger, train_loop
+    from jaxgest.runtime import parallel
+    from jaxgest.runtime.training import MetricsLogger, train_loop
 
     mesh = parallel.make_mesh(args.devices)
     state, step_fn, batch_fn = BUILDERS[name](args.seed, args.batch)
@@ -219,7 +219,7 @@ def run_model(name: str, args, out: pathlib.Path) -> dict:
 
 def error_checks(args) -> dict:
     """Messages of the errors a user can cause: too many / zero devices, a batch that does not divide."""
-    from jaxgest import parallel
+    from jaxgest.runtime import parallel
 
     mesh = parallel.make_mesh(args.devices)
     odd = {"x": np.zeros((mesh.size + 2, 3), np.float32)} if mesh.size > 1 else None
@@ -247,8 +247,8 @@ def main(argv=None) -> int:
     if args.list:
         print(json.dumps(sorted(BUILDERS)))
         return 0
-    from jaxgest import parallel
-    from jaxgest.errors import JaxgestError
+    from jaxgest.runtime import parallel
+    from jaxgest.runtime.errors import JaxgestError
 
     try:
         parallel.maybe_initialize_distributed()  # multi-process when JAX_COORDINATOR_ADDRESS is set

@@ -3,7 +3,7 @@ paths, and the session's tiny trained models.
 
 Devices. The process sees ``NUM_DEVICES`` = 4 fake CPU devices (``jax_num_cpu_devices``, set before the
 backend starts), so the data-parallel tests run in-process (tests/test_parallel.py). Everything else keeps
-running on ONE device: while the tests run, :func:`jaxgest.parallel.make_mesh` called without a device count
+running on ONE device: while the tests run, :func:`jaxgest.runtime.parallel.make_mesh` called without a device count
 (training without ``--devices``) builds a 1-device mesh, as on a one-device machine; a test that wants every
 device passes the count (``devices=4`` / ``--devices 4``) or uses the ``all_devices`` fixture, which restores
 the package's own default (all visible devices).
@@ -40,7 +40,7 @@ jax.config.update("jax_num_cpu_devices", NUM_DEVICES)  # before anything starts 
 # not us; our modules cast explicitly instead.
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
-from jaxgest import parallel  # noqa: E402  (after the device count is configured)
+from jaxgest.runtime import parallel  # noqa: E402  (after the device count is configured)
 from tiny_models import train_tgst, train_zeggs  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]

@@ -22,7 +22,7 @@ import numpy as np
 import optax
 
 from jaxgest import cli
-from jaxgest.training import TrainState
+from jaxgest.runtime.training import TrainState
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 NOISE = ("Traceback", "Event loop is closed", "absl", "WARNING:", "ERROR:")

@@ -10,7 +10,7 @@ import pytest
 import soundfile as sf
 
 from jaxgest import audio
-from jaxgest.errors import AudioError, CheckpointError
+from jaxgest.runtime.errors import AudioError, CheckpointError
 
 SR = 16000
 

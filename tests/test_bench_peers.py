@@ -14,7 +14,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from benchmarks import harness, torch_peers as P  # noqa: E402
+from jaxgest.bench import harness, torch_peers as P  # noqa: E402
 
 QUIET = dict(log=lambda s: None)
 
@@ -57,7 +57,7 @@ def test_tgst_peer_equals_the_jax_transfer_and_a_wrong_peer_is_caught(tgst_tiny)
 
 
 def test_zeggs_peer_equals_the_jax_generator_and_a_wrong_peer_is_caught():
-    from benchmarks.cases import zeggs as Z
+    from jaxgest.bench.cases import zeggs as Z
     from jaxgest.zeggs.config import preset
 
     cfg = preset("tiny").model

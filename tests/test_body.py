@@ -7,10 +7,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import bvh
 from jaxgest.motion import body as B
 from jaxgest.motion import kinematics as K
+from jaxgest.motion import root_motion as RM
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
 
@@ -46,7 +47,7 @@ def test_body_round_trip_is_lossless_on_random_body_motions(seed):
     np.testing.assert_allclose(K.forward_kinematics(other), K.forward_kinematics(m), atol=1e-4)
     # The hips exp-map carries no yaw: its rotation has no twist about the vertical axis.
     hips_q = R.expmap_to_quat(c.upper[:, :3])
-    _, twist = K.swing_twist(R.quat_inv(hips_q), np.array([0.0, 1.0, 0.0]))
+    _, twist = RM.swing_twist(R.quat_inv(hips_q), np.array([0.0, 1.0, 0.0]))
     assert R.quat_angle(twist).max() < 1e-6
 
 
@@ -102,7 +103,7 @@ def test_body_tpose_is_a_standing_t_pose_facing_plus_z():
         np.testing.assert_allclose(toe / np.linalg.norm(toe), [0, 0, 1], atol=1e-3)
     assert at["Head"][1] > at["Neck"][1] > at["Chest"][1] > at["Hips"][1]
     # The yaw of the T-pose is zero: facing +Z is the canonical heading.
-    _, yaw = K.remove_root_yaw(Motion(sk, q[None], sk.offsets[None], 60))
+    _, yaw = RM.remove_root_yaw(Motion(sk, q[None], sk.offsets[None], 60))
     assert R.quat_angle(yaw).max() < 1e-9
 
 
@@ -186,7 +187,7 @@ def test_body_onto_zeggs_follows_the_body_and_keeps_unmapped_joints(zeggs_clip, 
     unmapped = [j for j in range(z.skeleton.num_joints) if j not in mapped]
     assert len(unmapped) == 75 - 21
     np.testing.assert_allclose(out.rotations[:, unmapped], z.rotations[:, unmapped], atol=1e-12)
-    feet = K.foot_joints(z.skeleton)  # feet, toes and toe tips (LeftToeBaseEnd)
+    feet = RM.foot_joints(z.skeleton)  # feet, toes and toe tips (LeftToeBaseEnd)
     assert len(feet) == 6
     np.testing.assert_allclose(K.forward_kinematics(out)[:, feet, 1].min(axis=1), 0, atol=1e-9)
 

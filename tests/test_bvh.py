@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import bvh
 from jaxgest.motion import rotations as R
 from jaxgest.motion.bvh import BVHError

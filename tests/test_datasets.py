@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxgest.errors import CheckpointError, DataError
+from jaxgest.runtime.errors import CheckpointError, DataError
 from jaxgest.motion import datasets as ds
 from jaxgest.motion.synthetic import CONTENTS, render_clip
 

@@ -19,9 +19,9 @@ import optax
 import pytest
 
 from jaxgest import cli
-from jaxgest.errors import CheckpointError
+from jaxgest.runtime.errors import CheckpointError
 from jaxgest.motion import bvh
-from jaxgest.training import Checkpointer, TrainState, strict_checkpoints, train_loop
+from jaxgest.runtime.training import Checkpointer, TrainState, strict_checkpoints, train_loop
 
 from faults_testing import (CORRUPTIONS, STAGE, assert_identical, copy, infer, kill_when, missing_state,
                             params_at, run, snapshot, subprocess_env, toy_problem, truncate_data)
@@ -161,7 +161,7 @@ def test_sigkill_during_a_checkpoint_save(tmp_path, key):
     code = f"""
 import pathlib, time, jax, jax.numpy as jnp, optax
 import orbax.checkpoint as ocp
-from jaxgest.training import Checkpointer, TrainState
+from jaxgest.runtime.training import Checkpointer, TrainState
 state = TrainState.create(apply_fn=None, params={{"w": jnp.arange(64, dtype=jnp.float32)}}, tx=optax.adam(0.1))
 ck = Checkpointer({str(tmp_path)!r}, kind="toy", config={{}})
 ck.save(state.replace(step=jnp.int32(2)))

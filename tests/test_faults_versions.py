@@ -11,7 +11,7 @@ import json
 import pytest
 
 from jaxgest.motion import bvh
-from jaxgest.training import FORMAT_VERSION
+from jaxgest.runtime.training import FORMAT_VERSION
 
 from faults_testing import STAGE, copy, infer, run, snapshot
 

@@ -15,10 +15,10 @@ import time
 
 import pytest
 
-from jaxgest import io
-from jaxgest.errors import WriteError
+from jaxgest.runtime import io
+from jaxgest.runtime.errors import WriteError
 from jaxgest.motion import bvh
-from jaxgest.training import Checkpointer, MetricsLogger, train_loop
+from jaxgest.runtime.training import Checkpointer, MetricsLogger, train_loop
 
 from faults_testing import NOISE, copy, infer, kill_when, run, snapshot, toy_problem
 
@@ -77,7 +77,7 @@ def test_metrics_line_that_cannot_be_written_leaves_no_half_line(tmp_path, key, 
         def __exit__(self, *a):
             self.f.close()
 
-    monkeypatch.setattr("jaxgest.training.open", HalfWriter, raising=False)
+    monkeypatch.setattr("jaxgest.runtime.training.open", HalfWriter, raising=False)
     with pytest.raises(WriteError, match=r"metrics.jsonl: cannot write \(No space left on device\); the existing "
                                          r"file is unchanged; stopped at step 3, no checkpoint was written"):
         train_loop(state, step_fn, batch_fn, key=key, num_steps=4, logger=log, log_every=1, progress=False)
@@ -175,7 +175,7 @@ def test_sigkill_during_an_output_write(tiny, capsys, tmp_path):
     marker = tmp_path / "writing"
     code = f"""
 import pathlib, time
-from jaxgest.io import atomic_output
+from jaxgest.runtime.io import atomic_output
 with atomic_output({str(out)!r}) as tmp:
     with open(tmp, "w") as f:
         f.write("HIERARCHY\\nROOT Hips\\n")  # the first part of a file

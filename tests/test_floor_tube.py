@@ -8,6 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxgest.motion import kinematics as K
+
+from jaxgest.motion import root_motion as RM
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
 
@@ -48,7 +50,7 @@ def tv(x) -> float:
 
 
 def lowest(m: Motion) -> np.ndarray:
-    return K.lowest_foot_height(m)
+    return RM.lowest_foot_height(m)
 
 
 @settings(max_examples=30, deadline=None)
@@ -57,8 +59,8 @@ def test_tolerance_zero_on_every_frame_is_floor_contact_exactly(seed, F, wrapper
     rng = np.random.default_rng(seed)
     m = wobbly_motion(rng, F, wrapper)
     height = rng.normal(size=F)
-    a = K.floor_contact_tube(m, height=height, tolerance=0.0)
-    b = K.floor_contact(m, height=height)
+    a = RM.floor_contact_tube(m, height=height, tolerance=0.0)
+    b = RM.floor_contact(m, height=height)
     assert np.array_equal(a.translations, b.translations) and np.array_equal(a.rotations, m.rotations)
 
 
@@ -72,8 +74,8 @@ def test_tube_holds_on_contact_frames_and_moves_least(seed, F, tol, p_contact, w
     m = wobbly_motion(rng, F, wrapper)
     height = 4.25 + rng.normal(scale=0.5, size=F)
     contact = rng.random(F) < p_contact
-    out = K.floor_contact_tube(m, height=height, tolerance=tol, contact=contact)
-    per_frame = K.floor_contact(m, height=height)
+    out = RM.floor_contact_tube(m, height=height, tolerance=tol, contact=contact)
+    per_frame = RM.floor_contact(m, height=height)
     low = lowest(out)
     assert np.all(np.abs(low - height)[contact] <= tol + 1e-9)
     p0, p1 = K.forward_kinematics(m), K.forward_kinematics(out)
@@ -94,7 +96,7 @@ def test_non_contact_frames_are_straight_lines_between_contact_frames(seed, F, t
     m = wobbly_motion(rng, F)
     contact = rng.random(F) < 0.5
     contact[rng.integers(F)] = True
-    out = K.floor_contact_tube(m, height=0.0, tolerance=tol, contact=contact)
+    out = RM.floor_contact_tube(m, height=0.0, tolerance=tol, contact=contact)
     shift = lowest(out) - lowest(m)
     on = np.flatnonzero(contact)
     np.testing.assert_allclose(shift, np.interp(np.arange(F), on, shift[on]), atol=1e-9)
@@ -102,28 +104,28 @@ def test_non_contact_frames_are_straight_lines_between_contact_frames(seed, F, t
 
 def test_no_contact_frame_leaves_the_motion_as_it_is():
     m = wobbly_motion(np.random.default_rng(3), 12)
-    out = K.floor_contact_tube(m, height=0.0, tolerance=0.5, contact=np.zeros(12, bool))
+    out = RM.floor_contact_tube(m, height=0.0, tolerance=0.5, contact=np.zeros(12, bool))
     assert np.array_equal(out.translations, m.translations)
 
 
 def test_taut_string_hand_cases():
     # a step inside the tube is absorbed (level path), a larger one is spread over the free frames
     lo, hi = np.array([0.0, 0, 0, 2, 2, 2]) - 0.5, np.array([0.0, 0, 0, 2, 2, 2]) + 0.5
-    np.testing.assert_allclose(K.taut_string(lo, hi), [0.5, 0.5, 0.5, 1.5, 1.5, 1.5])
+    np.testing.assert_allclose(RM.taut_string(lo, hi), [0.5, 0.5, 0.5, 1.5, 1.5, 1.5])
     lo = np.array([0.0, -np.inf, -np.inf, -np.inf, 4.0])
     hi = np.array([0.0, np.inf, np.inf, np.inf, 4.0])
-    np.testing.assert_allclose(K.taut_string(lo, hi), [0, 1, 2, 3, 4])
+    np.testing.assert_allclose(RM.taut_string(lo, hi), [0, 1, 2, 3, 4])
     # a level path fits: the middle of the common interval
-    np.testing.assert_allclose(K.taut_string(np.array([0.0, 1.0]), np.array([3.0, 2.0])), [1.5, 1.5])
+    np.testing.assert_allclose(RM.taut_string(np.array([0.0, 1.0]), np.array([3.0, 2.0])), [1.5, 1.5])
     # one-sided bounds
-    np.testing.assert_allclose(K.taut_string(np.array([1.0, -np.inf, 3.0]), np.array([np.inf, 0.0, np.inf])),
+    np.testing.assert_allclose(RM.taut_string(np.array([1.0, -np.inf, 3.0]), np.array([np.inf, 0.0, np.inf])),
                                [1.0, 0.0, 3.0])
     x = np.random.default_rng(0).normal(size=30)
-    assert np.array_equal(K.taut_string(x, x), x)
+    assert np.array_equal(RM.taut_string(x, x), x)
     with pytest.raises(ValueError):
-        K.taut_string(np.array([1.0]), np.array([0.0]))
+        RM.taut_string(np.array([1.0]), np.array([0.0]))
     with pytest.raises(ValueError):
-        K.floor_contact_tube(wobbly_motion(np.random.default_rng(0), 4), tolerance=-1.0)
+        RM.floor_contact_tube(wobbly_motion(np.random.default_rng(0), 4), tolerance=-1.0)
 
 
 @settings(max_examples=40, deadline=None)
@@ -137,7 +139,7 @@ def test_taut_string_is_least_total_variation(seed, F):
     tol = rng.choice([0.0, 0.3, 1.0])
     on = rng.random(F) < 0.7
     lo, hi = np.where(on, s - tol, -np.inf), np.where(on, s + tol, np.inf)
-    x = K.taut_string(lo, hi)
+    x = RM.taut_string(lo, hi)
     assert np.all(x[on] >= lo[on]) and np.all(x[on] <= hi[on])
     m = F - 1
     A = np.zeros((2 * m, F + m))
@@ -161,7 +163,7 @@ def test_content_floor_contact_tolerance():
     t = np.arange(F)
     jump = np.where((t > 100) & (t < 160), 15 * np.sin(np.pi * (t - 100) / 60), 0)
     hips = K.forward_kinematics(content)[:, K._hips_index(content.skeleton)]
-    content = K.set_root_position(content, hips + jump[:, None] * np.array([0.0, 1.0, 0.0]))
+    content = RM.set_root_position(content, hips + jump[:, None] * np.array([0.0, 1.0, 0.0]))
     rng = np.random.default_rng(0)
     wobble = content.rotations.copy()
     legs = [content.skeleton.index(n) for n in content.skeleton.names if "Leg" in n or "Foot" in n]
@@ -169,14 +171,14 @@ def test_content_floor_contact_tolerance():
         rng.normal(scale=0.03, size=(F, len(legs), 3)))))
     result = content.replace(rotations=wobble)  # legs with frame-to-frame errors, the content's root
     feet = api.foot_names(content.skeleton)
-    c_low = K.lowest_foot_height(content, feet)
+    c_low = RM.lowest_foot_height(content, feet)
     contact = api.content_contact_frames(content)
     assert 0 < (~contact).sum() < F // 2
     today = api.content_floor_contact(result, content, tolerance=0.0)
-    per_frame = K.floor_contact(result, feet=feet, height=c_low)
+    per_frame = RM.floor_contact(result, feet=feet, height=c_low)
     np.testing.assert_array_equal(today.translations, per_frame.translations)
     tube = api.content_floor_contact(result, content, tolerance=0.9)
-    assert np.abs(K.lowest_foot_height(tube, feet) - c_low)[contact].max() <= 0.9 + 1e-9
+    assert np.abs(RM.lowest_foot_height(tube, feet) - c_low)[contact].max() <= 0.9 + 1e-9
     h = K._hips_index(content.skeleton)
     y = {k: K.forward_kinematics(m)[:, h, 1] - hips[:, 1] - jump
          for k, m in (("today", today), ("tube", tube))}

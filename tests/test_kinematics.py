@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from jaxgest.motion import bvh
 from jaxgest.motion import kinematics as K
+from jaxgest.motion import root_motion as RM
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
 
@@ -173,12 +174,12 @@ def test_mirror_frames_without_tpose_inherit_the_parent_on_ties():
 @given(st.integers(0, 2**31 - 1))
 def test_yaw_removal_then_restore_is_identity(seed):
     m = random_motion(np.random.default_rng(seed), sym_skeleton())
-    m2, yaw = K.remove_root_yaw(m)
-    back = K.restore_root_yaw(m2, yaw)
+    m2, yaw = RM.remove_root_yaw(m)
+    back = RM.restore_root_yaw(m2, yaw)
     np.testing.assert_allclose(K.forward_kinematics(back), K.forward_kinematics(m), atol=1e-9)
     # After removal the hips' world rotation has no twist about the vertical axis.
     g = K.global_rotations(m2)[:, 0]
-    _, twist = K.swing_twist(R.quat_inv(g), np.array([0.0, 1.0, 0.0]))
+    _, twist = RM.swing_twist(R.quat_inv(g), np.array([0.0, 1.0, 0.0]))
     assert R.quat_angle(twist).max() < 1e-6
     # yaw is a pure rotation about +Y
     np.testing.assert_allclose(yaw[:, [1, 3]], 0, atol=1e-12)
@@ -186,9 +187,9 @@ def test_yaw_removal_then_restore_is_identity(seed):
 
 def test_floor_contact_puts_lowest_foot_on_floor():
     m = random_motion(np.random.default_rng(1), sym_skeleton())
-    f = K.floor_contact(m)
+    f = RM.floor_contact(m)
     pos = K.forward_kinematics(f)
-    feet = K.foot_joints(m.skeleton)
+    feet = RM.foot_joints(m.skeleton)
     assert feet == [3, 5]
     np.testing.assert_allclose(pos[:, feet, 1].min(axis=1), 0, atol=1e-9)
     # Only heights change.
@@ -216,8 +217,8 @@ def test_real_files_mirror_and_yaw(bandai_dir, zeggs_dir):
         rot_only = [j for j, c in enumerate(m.skeleton.channels) if len(c) == 3]
         np.testing.assert_array_equal(mirrored.translations[:, rot_only], m.translations[:, rot_only])
         assert np.abs(K.forward_kinematics(mirrored) - reflected).max() < 4.0  # ZEGGS: 3.6 cm at fingertips
-        m2, yaw = K.remove_root_yaw(m)
-        np.testing.assert_allclose(K.forward_kinematics(K.restore_root_yaw(m2, yaw)), p, atol=1e-6)
+        m2, yaw = RM.remove_root_yaw(m)
+        np.testing.assert_allclose(K.forward_kinematics(RM.restore_root_yaw(m2, yaw)), p, atol=1e-6)
     bn = bvh.load(sorted(bandai_dir.glob("*.bvh"))[0])
     # Bandai-Namco's rig is symmetric to 0.05 cm: mirrored local translations stay at the rest offsets.
     assert np.abs(K.mirror(bn).translations[:, 2:] - bn.skeleton.offsets[2:]).max() < 0.05
@@ -307,19 +308,19 @@ def test_yaw_removal_is_invariant_to_turning_the_whole_motion(seed, angle):
     trans = m.translations.copy()
     trans[:, 0] = R.quat_rotate(turn, trans[:, 0])
     turned = m.replace(rotations=rot, translations=trans)
-    a, yaw_a = K.remove_root_yaw(m)
-    b, yaw_b = K.remove_root_yaw(turned)
+    a, yaw_a = RM.remove_root_yaw(m)
+    b, yaw_b = RM.remove_root_yaw(turned)
     np.testing.assert_allclose(K.forward_kinematics(b), K.forward_kinematics(a), atol=1e-9)
     expected = R.quat_mul(turn[None], yaw_a)
     assert R.quat_angle(R.quat_mul(R.quat_inv(expected), yaw_b)).max() < 1e-9
 
 
 def test_floor_contact_without_feet_is_a_clear_error():
-    from jaxgest.errors import DataError
+    from jaxgest.runtime.errors import DataError
 
     m = random_motion(np.random.default_rng(0), chain())
     with pytest.raises(DataError, match="no foot/toe joints"):
-        K.floor_contact(m)
+        RM.floor_contact(m)
 
 
 def _scipy_fk(m):
@@ -347,8 +348,8 @@ def test_fk_matches_scipy_on_real_files_and_floor_contact(bandai_dir, zeggs_dir)
         mm = K.mirror(K.mirror(m))
         assert R.quat_angle(R.quat_mul(R.quat_inv(mm.rotations), m.rotations)).max() < 1e-9
         np.testing.assert_allclose(mm.translations, m.translations, atol=1e-9)
-        fl = K.floor_contact(m)
-        feet = K.foot_joints(m.skeleton)
+        fl = RM.floor_contact(m)
+        feet = RM.foot_joints(m.skeleton)
         np.testing.assert_allclose(K.forward_kinematics(fl)[:, feet, 1].min(axis=1), 0, atol=1e-9)
 
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from jaxgest.errors import AudioError, DataError
+from jaxgest.runtime.errors import AudioError, DataError
 from jaxgest.metrics import (
     beat_alignment,
     frechet_distance,

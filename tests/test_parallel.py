@@ -1,9 +1,9 @@
-"""Data-parallel training (jaxgest.parallel): 4 devices train to the parameters of 1 device.
+"""Data-parallel training (jaxgest.runtime.parallel): 4 devices train to the parameters of 1 device.
 
 The test process has 4 fake CPU devices (tests/conftest.py, ``jax_num_cpu_devices``). Two layers are checked:
 
 * the mechanism: the worker of tests/_parallel_worker.py runs IN-PROCESS on 1 device and on 4 devices with
-  its two toy models (an MLP and a strided conv net; :mod:`jaxgest.parallel` knows nothing about the model):
+  its two toy models (an MLP and a strided conv net; :mod:`jaxgest.runtime.parallel` knows nothing about the model):
   same parameters and losses, the batch split in blocks over the devices, the state replicated, an all-reduce
   in the compiled step, the device count in metrics.jsonl;
 * the real models: ``tgst.train.train`` and ``zeggs.train.train`` with ``devices=4`` and the session's tiny
@@ -33,10 +33,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxgest import parallel
-from jaxgest.errors import JaxgestError
+from jaxgest.runtime import parallel
+from jaxgest.runtime.errors import JaxgestError
 from jaxgest.tgst.config import preset as tgst_preset
-from jaxgest.training import TrainState
+from jaxgest.runtime.training import TrainState
 
 from faults_testing import params_at
 from tiny_models import TGST_STEPS, ZEGGS_STEPS, train_tgst, train_zeggs

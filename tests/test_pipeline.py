@@ -7,7 +7,7 @@ import pytest
 import soundfile as sf
 
 from jaxgest import cli
-from jaxgest.motion import bvh, kinematics
+from jaxgest.motion import bvh, kinematics, root_motion
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,7 @@ def test_pipeline_api_output_on_style_rig_with_audio_length(workdirs, zeggs_dir)
     assert styled.num_frames == round(info.frames / info.samplerate * real_style.fps)
     assert generated.skeleton.names == neutral.skeleton.names
     assert np.all(np.isfinite(styled.rotations)) and set(times) == {"load_s", "zeggs_s", "tgst_s"}
-    feet = kinematics.foot_joints(styled.skeleton)
+    feet = root_motion.foot_joints(styled.skeleton)
     np.testing.assert_allclose(kinematics.forward_kinematics(styled)[:, feet, 1].min(axis=1), 0.0, atol=1e-4)
 
 

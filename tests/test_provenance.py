@@ -2,8 +2,8 @@ import json
 
 import pytest
 
-from jaxgest import provenance
-from jaxgest.errors import DataError
+from jaxgest.runtime import provenance
+from jaxgest.runtime.errors import DataError
 
 
 def test_stamp_names_commit_version_config_command(tmp_path):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion.synthetic import CONTENTS, render_clip
 from jaxgest.render import project, render_gif, render_png
 

@@ -15,7 +15,7 @@ The kill *during* a save polls for orbax's temporary folder and kills as soon as
 is checkpointed, so most of the run is spent saving); whether the kill landed inside the save is read
 from the folder left behind, and the attempt is repeated a few times if it did not.
 
-A non-finite loss (or non-finite parameters after a NaN gradient) stops :func:`jaxgest.training.train_loop`
+A non-finite loss (or non-finite parameters after a NaN gradient) stops :func:`jaxgest.runtime.training.train_loop`
 with a one-line TrainingError and leaves the last good checkpoint as the latest one.
 """
 
@@ -37,8 +37,8 @@ import numpy as np
 import optax
 import pytest
 
-from jaxgest.errors import TrainingError
-from jaxgest.training import Checkpointer, MetricsLogger, TrainState, train_loop
+from jaxgest.runtime.errors import TrainingError
+from jaxgest.runtime.training import Checkpointer, MetricsLogger, TrainState, train_loop
 
 from conftest import NUM_DEVICES
 from faults_testing import assert_identical, params_at

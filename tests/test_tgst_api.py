@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from jaxgest import cli
-from jaxgest.errors import CheckpointError, DataError, JaxgestError
-from jaxgest.motion import bvh, datasets, kinematics
+from jaxgest.runtime.errors import CheckpointError, DataError, JaxgestError
+from jaxgest.motion import bvh, datasets, kinematics, root_motion
 from tiny_models import train_tgst
 
 
@@ -113,7 +113,7 @@ def test_transfer_all_methods_keep_content_skeleton_and_length(trained, model, m
     assert out.fps == content.fps and np.all(np.isfinite(out.rotations))
     # floor contact at the content's height (paper §3.1, the default): the lowest foot/toe joint where the
     # content's is, every frame
-    feet = kinematics.foot_joints(out.skeleton)
+    feet = root_motion.foot_joints(out.skeleton)
     np.testing.assert_allclose(kinematics.forward_kinematics(out)[:, feet, 1].min(axis=1),
                                kinematics.forward_kinematics(content)[:, feet, 1].min(axis=1), atol=1e-6)
 
@@ -246,7 +246,7 @@ def test_a_workdir_of_the_flat_config_layout_still_transfers(trained, model, tmp
 
     from jaxgest.tgst import workdir as W
     from jaxgest.tgst.api import load_model
-    from jaxgest.training import Checkpointer, TrainState, write_json_atomic
+    from jaxgest.runtime.training import Checkpointer, TrainState, write_json_atomic
 
     data, work, _ = trained
     old = tmp_path / "old"
@@ -307,8 +307,8 @@ def test_output_keeps_the_contents_floor_contact_height(trained, model):
     jump = np.where((np.arange(F) > 60) & (np.arange(F) < 90), 20.0 * np.sin(np.pi * (np.arange(F) - 60) / 30), 0.0)
     lift = 4.25 + jump  # cm above the original per-frame height
     hips = kinematics.forward_kinematics(content)[:, 0]
-    raised = kinematics.set_root_position(content, hips + lift[:, None] * np.array([0.0, 1.0, 0.0]))
-    feet = kinematics.foot_joints(content.skeleton)
+    raised = root_motion.set_root_position(content, hips + lift[:, None] * np.array([0.0, 1.0, 0.0]))
+    feet = root_motion.foot_joints(content.skeleton)
     c_low = kinematics.forward_kinematics(raised)[:, feet, 1].min(axis=1)
     contact = c_low < c_low.min() + 1.0  # frames where the content's lowest foot is at its contact height
     assert contact.sum() > F // 2 and (~contact).sum() >= 20 and c_low.min() > 4.0

@@ -80,7 +80,7 @@ def test_flat_config_of_older_versions_maps_to_the_split_with_old_defaults():
 
 
 def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
-    from jaxgest.errors import JaxgestError
+    from jaxgest.runtime.errors import JaxgestError
     from jaxgest.tgst.train import apply_overrides
 
     cfg = apply_overrides(preset("fit"), {"swap_similarity": "scaled", "transformer.token_positions": "index",
@@ -116,8 +116,8 @@ def test_checkpoints_check_only_the_model_config(tmp_path):
     flat layout of older versions (whole config, fields it predates absent) matches the same model."""
     import types
 
-    from jaxgest import training
-    from jaxgest.errors import CheckpointError
+    from jaxgest.runtime import training
+    from jaxgest.runtime.errors import CheckpointError
     from jaxgest.tgst.workdir import AE_KIND, AE_SUBDIR, ae_checkpointer
 
     def save(folder, config):

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import jaxgest.tgst.api
-import jaxgest.tgst.cli
+import jaxgest.commands.tgst
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import Clip, load_folder
 from jaxgest.motion.synthetic import write_dataset
@@ -238,7 +238,7 @@ def test_metric_validity_is_table_1_of_the_pairs(data_dir, clips, protocol):
 def test_cli_writes_json_and_prints_table(data_dir, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(jaxgest.tgst.api, "load_model", lambda workdir: IdentityModel(), raising=False)
     parser = argparse.ArgumentParser()
-    jaxgest.tgst.cli.register_evaluate(parser.add_subparsers())
+    jaxgest.commands.tgst.register_evaluate(parser.add_subparsers())
     out = tmp_path / "eval.json"
     argv = f"evaluate --workdir {tmp_path} --data {data_dir} --json {out} --pairs inter --methods soft,hard"
     args = parser.parse_args(argv.split() + ["--max-pairs", "3", "--validity"])

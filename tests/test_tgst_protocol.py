@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxgest import metrics
-from jaxgest.motion import bvh, kinematics
+from jaxgest.motion import bvh, kinematics, root_motion
 from jaxgest.motion.synthetic import render_clip
 from jaxgest.tgst import evaluate as ev
 
@@ -54,7 +54,7 @@ def test_constant_speed_clip_features_at_both_ends(clip):
     F, fps = 90, clip.fps
     still = clip.replace(rotations=np.repeat(clip.rotations[:1], F, 0), translations=np.repeat(clip.translations[:1], F, 0))
     u = np.array([80.0, 0.0, -45.0])  # cm/s
-    moved = kinematics.set_root_position(still, kinematics.forward_kinematics(still)[:, 0] + (np.arange(F) / fps)[:, None] * u)
+    moved = root_motion.set_root_position(still, kinematics.forward_kinematics(still)[:, 0] + (np.arange(F) / fps)[:, None] * u)
     world_fwd = ev.Protocol("world-fwd", root_local=False, trim_seconds=0.0, forward_differences=True,
                             mirror_style=False)
     _, arms = ev.clip_features(moved, protocol=world_fwd)
@@ -63,7 +63,7 @@ def test_constant_speed_clip_features_at_both_ends(clip):
     # root-local (authors): translation and a constant-rate turn of the root leave no velocity, ends included
     half = np.arange(F) * 0.025  # 0.05 rad per frame about +Y
     yaw = np.stack([np.cos(half), np.zeros(F), np.sin(half), np.zeros(F)], -1)
-    turned = kinematics.restore_root_yaw(moved, yaw)
+    turned = root_motion.restore_root_yaw(moved, yaw)
     no_cut = ev.get_protocol("authors", trim_seconds=0.0)
     _, local = ev.clip_features(turned, protocol=no_cut)
     np.testing.assert_allclose(local, 0.0, atol=1e-9)
@@ -140,8 +140,8 @@ def test_root_local_positions_are_fk_with_the_root_reset(clip):
     local = kinematics.root_local_positions(clip)
     np.testing.assert_allclose(local, kinematics.forward_kinematics(reset), atol=1e-9)
     # a rigid turn and shift of the whole clip changes world positions, not root-local ones
-    turned = kinematics.restore_root_yaw(clip, np.tile([math.cos(0.6), 0, math.sin(0.6), 0], (clip.num_frames, 1)))
-    turned = kinematics.set_root_position(turned, kinematics.forward_kinematics(turned)[:, 0] + [50.0, 0, -20])
+    turned = root_motion.restore_root_yaw(clip, np.tile([math.cos(0.6), 0, math.sin(0.6), 0], (clip.num_frames, 1)))
+    turned = root_motion.set_root_position(turned, kinematics.forward_kinematics(turned)[:, 0] + [50.0, 0, -20])
     np.testing.assert_allclose(kinematics.root_local_positions(turned), local, atol=1e-8)
     assert np.abs(kinematics.forward_kinematics(turned) - kinematics.forward_kinematics(clip)).max() > 10
 

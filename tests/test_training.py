@@ -10,8 +10,8 @@ import numpy as np
 import optax
 import pytest
 
-from jaxgest.errors import CheckpointError, TrainingError
-from jaxgest.training import Checkpointer, MetricsLogger, TrainState, config_diff, train_loop
+from jaxgest.runtime.errors import CheckpointError, TrainingError
+from jaxgest.runtime.training import Checkpointer, MetricsLogger, TrainState, config_diff, train_loop
 
 
 def _toy(lr=0.1):
@@ -111,7 +111,7 @@ def test_checkpointer_has_no_process_wide_side_effects(tmp_path, monkeypatch):
     import logging
     import sys
 
-    from jaxgest import orbax_noise
+    from jaxgest.runtime import orbax_noise
 
     def hook(unraisable):  # stands for whatever the process had installed
         pass
@@ -141,7 +141,7 @@ def test_orphan_tensorstore_task_records_are_dropped_only_while_muted(caplog, mo
     import logging
     import sys
 
-    from jaxgest import orbax_noise
+    from jaxgest.runtime import orbax_noise
 
     def orphan(message):
         async def fail():

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from jaxgest.errors import CheckpointError, JaxgestError
+from jaxgest.runtime.errors import CheckpointError, JaxgestError
 from jaxgest.motion import bvh
 from tiny_models import train_zeggs
 

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxgest.audio import FEATURE_DIM, FeatureStats, load_audio, speech_features
-from jaxgest.errors import AudioError, DataError
+from jaxgest.runtime.errors import AudioError, DataError
 from jaxgest.motion.synthetic import write_dataset
 from jaxgest.zeggs import data as zdata
 

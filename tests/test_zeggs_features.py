@@ -181,11 +181,11 @@ def _zeggs_named_rig(leg_scale: float = 1.3):
 
 
 def test_rig_transfer_is_identity_on_the_same_rig_and_stands_on_the_floor_on_another(synthetic_motion):
-    """motion.retarget.to_rig (the one rig transfer of pipeline and ZeroEGGS inference): the motion itself on
+    """motion.body.to_rig (the one rig transfer of pipeline and ZeroEGGS inference): the motion itself on
     its own rig; on another rig (ZEGGS joint names, legs 30 % longer) through the body maps with the lowest
     foot on the floor every frame, which the plain body retarget does not give."""
     from jaxgest.motion import body
-    from jaxgest.motion.retarget import to_rig
+    from jaxgest.motion.body import to_rig
 
     m = synthetic_motion
     assert to_rig(m, m) is m

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from flax.training.train_state import TrainState
 
-from jaxgest.errors import JaxgestError
+from jaxgest.runtime.errors import JaxgestError
 from jaxgest.motion import rotations as R
 from jaxgest.zeggs import features, losses, steps
 from jaxgest.zeggs.api import count_params
@@ -323,7 +323,7 @@ def test_optimizer_is_radam_with_staircase_decay():
 
 
 def test_compile_options_tiny_only_and_cli_overrides():
-    from jaxgest.zeggs.cli import parse_overrides
+    from jaxgest.commands.zeggs import parse_overrides
 
     paper = preset("paper")
     assert paper.train.xla_opt_level is None and paper.train.compiler_options is None  # XLA defaults

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxgest.errors import CheckpointError, JaxgestError
+from jaxgest.runtime.errors import CheckpointError, JaxgestError
 from jaxgest.zeggs.pca import StylePCA, fit_pca, parse_edits
 
 

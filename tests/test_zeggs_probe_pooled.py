@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 
 def _relabelled(src, dst, labels):

@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxgest.zeggs import quant as Q
+from jaxgest.zeggs.model import calibrate
 
 
 @settings(max_examples=30, deadline=None)
@@ -62,7 +63,7 @@ def test_dense_apply_dequantises_in_the_product(batch):
 @pytest.mark.parametrize("group,rows", [(32, 1), (16, 3), (7, 2)])
 def test_int8_kernel_equals_the_xla_path(group, rows, monkeypatch):
     """The C++ kernel (AVX-512 for groups of a multiple of 16, the portable loop otherwise) against XLA."""
-    from jaxgest.zeggs import int8_kernel
+    from jaxgest.kernels import int8_kernel
 
     if not int8_kernel.available():
         pytest.skip("no C++ compiler: the int8 kernel is not built (the XLA path is tested below)")
@@ -83,7 +84,7 @@ def test_int8_kernel_threads_give_the_same_bits(group, rows):
     """Rows split across XLA's intra-op pool (chunks of >= 64 kB of weights: 1027 x 256 int8 makes several
     chunks, 1027 is not a multiple of 4) give bit-identical outputs for any number of workers, in a plain
     call and inside a scan (the generator's loop)."""
-    from jaxgest.zeggs import int8_kernel
+    from jaxgest.kernels import int8_kernel
 
     if not int8_kernel.available():
         pytest.skip("no C++ compiler: the int8 kernel is not built")
@@ -109,7 +110,7 @@ def test_int8_kernel_threads_give_the_same_bits(group, rows):
 
 
 def test_int8_kernel_without_a_compiler_is_not_built(monkeypatch, tmp_path):
-    from jaxgest.zeggs import int8_kernel
+    from jaxgest.kernels import int8_kernel
 
     monkeypatch.setenv("JAXGEST_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(int8_kernel, "_compiler", lambda: None)
@@ -120,7 +121,7 @@ def test_int8_kernel_without_a_compiler_is_not_built(monkeypatch, tmp_path):
 
 @pytest.fixture(scope="module")
 def tiny():
-    from benchmarks.cases import zeggs as Z
+    from jaxgest.bench.cases import zeggs as Z
     from jaxgest.zeggs.config import preset
 
     cfg = preset("tiny").model
@@ -136,7 +137,7 @@ def test_the_model_generates_every_format(tiny):
     out = jax.device_get(gen(fp32, *inputs))
     for k in ref:
         np.testing.assert_array_equal(out[k], ref[k], err_msg=k)  # fp32 through the quantised path: the model
-    means = Q.calibrate(cfg, params, *inputs)
+    means = calibrate(cfg, params, *inputs)
     assert means["gru0"]["input"].shape == (params["generator"]["decoder"]["gru0"]["input"]["kernel"].shape[0],)
     for fmt in ("bf16", "int8"):
         for m in (None, means):
@@ -160,14 +161,14 @@ def test_int8_and_bf16_stay_within_one_percent_of_the_pose_range_after_600_frame
     difference against fp32 over 600 generated frames <= 1 % of the mean per-channel pose range, with the
     bias correction calibrated on other inputs (another input seed); the same fp32 model with its initial
     pose moved by 1e-6 is the control (how much a tiny change grows over the frames)."""
-    from benchmarks.cases import zeggs as Z
+    from jaxgest.bench.cases import zeggs as Z
     from jaxgest.zeggs.config import preset
 
     cfg = preset("tiny").model
     params = Z.random_params(cfg, seed=seed)
     gen = jax.jit(Z._generate_fn(cfg))
     inputs = Z.generator_inputs(cfg, 1, 600, seed=0)
-    means = Q.calibrate(cfg, params, *Z.generator_inputs(cfg, 1, 200, seed=1))
+    means = calibrate(cfg, params, *Z.generator_inputs(cfg, 1, 200, seed=1))
     ref = np.asarray(gen(params, *inputs)["pose"], np.float64)
     pose_range = np.mean(ref.max(1) - ref.min(1))
 
@@ -180,8 +181,8 @@ def test_int8_and_bf16_stay_within_one_percent_of_the_pose_range_after_600_frame
 
 
 def test_inference_generate_takes_a_weight_format():
-    from benchmarks.cases import zeggs as Z
-    from jaxgest.errors import JaxgestError
+    from jaxgest.bench.cases import zeggs as Z
+    from jaxgest.runtime.errors import JaxgestError
     from jaxgest.zeggs.config import preset
     from jaxgest.zeggs.inference import TrainedZeggs
     from jaxgest.zeggs.model import apply_fns

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 
 def register(subparsers) -> None:

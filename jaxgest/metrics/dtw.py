@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 # Predecessor codes stored by the forward pass.
 _DIAG, _UP, _LEFT = 0, 1, 2

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from jaxgest.errors import AudioError, DataError
+from jaxgest.runtime.errors import AudioError, DataError
 
 # --------------------------------------------------------------------------------------------------------
 # Linear probe

@@ -30,7 +30,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.metrics.dtw import dtw, path_distances
 from jaxgest.motion import kinematics
 

@@ -27,8 +27,8 @@ import re
 
 import numpy as np
 
-from jaxgest.errors import DataError
-from jaxgest.io import atomic_output
+from jaxgest.runtime.errors import DataError
+from jaxgest.runtime.io import atomic_output
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
 

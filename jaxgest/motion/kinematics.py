@@ -1,4 +1,4 @@
-"""Forward kinematics and velocities (SPEC §2); mirroring, root yaw and floor contact re-exported.
+"""Forward kinematics and velocities (SPEC §2); mirroring re-exported.
 
 Also the pieces of the authors' evaluation protocol (SPEC §5): :func:`root_local_positions` (root at the
 origin, root rotation reset), :func:`forward_differences` and :func:`append_motion` (the mirrored style clip
@@ -9,41 +9,23 @@ float64 (exact file-level numbers). :func:`fk_positions` is the batched ``jax.nu
 inside jit (losses, features); its parent array is static.
 
 SPEC §1 puts mirroring, yaw removal and floor contact here too; they live in
-:mod:`jaxgest.motion.mirroring` and :mod:`jaxgest.motion.root_motion` and stay importable from this module
-(``from jaxgest.motion.kinematics import mirror, remove_root_yaw, floor_contact`` etc.).
+:mod:`jaxgest.motion.mirroring` (re-exported here) and :mod:`jaxgest.motion.root_motion` (a layer above:
+it builds on this module's FK).
 """
 
 from __future__ import annotations
 
 import functools
-import importlib
 from typing import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import rotations as R
 from jaxgest.motion.mirroring import mirror, mirror_frames  # noqa: F401 (re-exported)
 from jaxgest.motion.skeleton import Motion, Skeleton, mirror_pairs, mirror_partner  # noqa: F401 (re-exported)
-from jaxgest.motion.taut_string import taut_string  # noqa: F401 (re-exported; floor_contact_tube's solver)
-
-# root_motion builds on this module's FK, so its names are re-exported lazily (PEP 562), not imported here
-_ROOT_MOTION = ("swing_twist", "remove_root_yaw", "restore_root_yaw", "set_root_position",
-                "FOOT_HINTS", "foot_joints", "lowest_foot_height", "floor_contact", "shift_root_height",
-                "floor_contact_tube")
-
-
-def __getattr__(name: str):
-    if name in _ROOT_MOTION:
-        return getattr(importlib.import_module("jaxgest.motion.root_motion"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(list(globals()) + list(_ROOT_MOTION))
-
 
 # ---------------------------------------------------------------------------------------------------
 # The root joint

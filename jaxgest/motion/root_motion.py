@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import rotations as R
 from jaxgest.motion.kinematics import (  # noqa: F401 (_hips_index re-exported)
     _hips_index, _root_and_parent, forward_kinematics, global_rotations, global_transforms)

@@ -35,10 +35,10 @@ from typing import Optional
 import jax
 import numpy as np
 
-from jaxgest import model_cache
-from jaxgest.errors import DataError
+from jaxgest.runtime import model_cache
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import body, datasets
-from jaxgest.motion import kinematics as K
+from jaxgest.motion import root_motion as RM
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion
 from jaxgest.tgst import workdir as W
@@ -176,7 +176,7 @@ CONTACT_BAND = 1.0
 def content_contact_frames(content: Motion, band: float = CONTACT_BAND) -> np.ndarray:
     """``(F,)`` bools: the frames where ``content``'s lowest foot/toe joint is within ``band`` (file units)
     of its lowest height over the clip (standing or stepping, not in the air)."""
-    return _contact(K.lowest_foot_height(content, foot_names(content.skeleton)), band)
+    return _contact(RM.lowest_foot_height(content, foot_names(content.skeleton)), band)
 
 
 def _contact(low: np.ndarray, band: float = CONTACT_BAND) -> np.ndarray:
@@ -202,10 +202,10 @@ def content_floor_contact(result: Motion, content: Motion, tolerance: float = CO
     it.
     """
     feet = foot_names(content.skeleton)
-    height = K.lowest_foot_height(content, feet)
+    height = RM.lowest_foot_height(content, feet)
     if tolerance == 0:
-        return K.floor_contact(result, feet=feet, height=height)
-    return K.floor_contact_tube(result, feet=feet, height=height, tolerance=tolerance,
+        return RM.floor_contact(result, feet=feet, height=height)
+    return RM.floor_contact_tube(result, feet=feet, height=height, tolerance=tolerance,
                                 contact=_contact(height))  # content_contact_frames without a second FK
 
 
@@ -222,7 +222,7 @@ def load_model(workdir) -> TGSTModel:
 
 
 class ModelCache(model_cache.ModelCache):
-    """Loaded TGST models (:class:`jaxgest.model_cache.ModelCache`), keyed on the workdir and the checkpoint
+    """Loaded TGST models (:class:`jaxgest.runtime.model_cache.ModelCache`), keyed on the workdir and the checkpoint
     steps of both stages: a stage with a newer (or other) step is reloaded, an unchanged workdir is not."""
 
     def __init__(self, maxsize: int = 4):

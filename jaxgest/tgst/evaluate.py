@@ -32,7 +32,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.tgst import model as tgst_model
 from jaxgest.tgst.batched import (DEFAULT_BUCKET, BatchedTransfer, bucket_length,  # noqa: F401  (re-exported)
                                   swap_diagnostics)

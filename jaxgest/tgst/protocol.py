@@ -47,7 +47,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import body, kinematics
 from jaxgest.motion.skeleton import Motion
 

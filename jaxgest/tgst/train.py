@@ -5,8 +5,8 @@ data folder: ``--data`` or the built-in synthetic data). The workdir layout and 
 in :mod:`jaxgest.tgst.workdir`; config.json stores the effective :class:`~jaxgest.tgst.config.Config`
 (windows fitted to the data).
 
-Both stages use optax Adam (§3.5), one jit-compiled step each (:func:`jaxgest.training.jit_config_step`,
-state donated, batch split over the devices) and :func:`jaxgest.training.train_loop` (NaN stop, tqdm,
+Both stages use optax Adam (§3.5), one jit-compiled step each (:func:`jaxgest.runtime.training.jit_config_step`,
+state donated, batch split over the devices) and :func:`jaxgest.runtime.training.train_loop` (NaN stop, tqdm,
 checkpoints). A run resumes from the latest checkpoint of each stage; a finished autoencoder is not
 retrained. The transformer's checkpoint records the autoencoder step it was trained on: when the autoencoder
 has trained further, that transformer is moved aside (:func:`jaxgest.tgst.workdir.set_aside_stale_transformer`)
@@ -28,9 +28,9 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from jaxgest import parallel, training
-from jaxgest.training import bare_state, jit_config_step
-from jaxgest.errors import DataError, JaxgestError
+from jaxgest.runtime import parallel, training
+from jaxgest.runtime.training import bare_state, jit_config_step
+from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.tgst import autoencoder
 from jaxgest.tgst import data as tdata
 from jaxgest.tgst.config import Config, preset as get_preset
@@ -137,8 +137,8 @@ def transformer_optimizer(cfg: Config) -> optax.GradientTransformation:
     return optax.adam(cfg.train.transformer.learning_rate)
 
 
-# The two jitted steps, on bare states (:func:`jaxgest.training.bare_state`) with the optimiser built inside
-# from the static config and compiled by :func:`jaxgest.training.jit_config_step`: jit's own cache serves
+# The two jitted steps, on bare states (:func:`jaxgest.runtime.training.bare_state`) with the optimiser built inside
+# from the static config and compiled by :func:`jaxgest.runtime.training.jit_config_step`: jit's own cache serves
 # every training of one config in a process (resume, tests); nothing is memoised here.
 
 def _ae_step(state, batch, key, cfg: Config):

@@ -24,9 +24,9 @@ from typing import Mapping, Optional, Union
 
 import jax
 
-from jaxgest.checkpoint import Checkpointer
-from jaxgest.workdir_format import check_workdir_config
-from jaxgest.errors import CheckpointError
+from jaxgest.runtime.checkpoint import Checkpointer
+from jaxgest.runtime.workdir_format import check_workdir_config
+from jaxgest.runtime.errors import CheckpointError
 from jaxgest.tgst import data as tdata
 from jaxgest.tgst.config import Config, ModelConfig, legacy_to_dict, model_config_from_dict
 

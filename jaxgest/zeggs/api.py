@@ -20,8 +20,8 @@ from typing import Optional, Sequence, Union
 import jax
 import numpy as np
 
-from jaxgest import model_cache
-from jaxgest.errors import JaxgestError
+from jaxgest.runtime import model_cache
+from jaxgest.runtime.errors import JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.skeleton import Motion
 from jaxgest.zeggs.config import Config, ModelConfig, preset as get_preset
@@ -51,7 +51,7 @@ def _as_motions(styles) -> list[Motion]:
 
 
 class ModelCache(model_cache.ModelCache):
-    """Loaded ZeroEGGS models (:class:`jaxgest.model_cache.ModelCache`), keyed on the workdir, its newest
+    """Loaded ZeroEGGS models (:class:`jaxgest.runtime.model_cache.ModelCache`), keyed on the workdir, its newest
     checkpoint step and that step folder's modification time: a run that trains further (a new step) or is
     retrained into the same workdir (a rewritten step folder) is loaded again."""
 

@@ -49,7 +49,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import kinematics
 from jaxgest.motion import rotations
 from jaxgest.motion.datasets import Clip, NormStats, load_clip_audio, load_folder, resample_motion

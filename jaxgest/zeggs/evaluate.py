@@ -26,7 +26,7 @@ from typing import Optional
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import body, kinematics
 from jaxgest.motion.datasets import load_clip_audio, load_folder
 from jaxgest.zeggs import features

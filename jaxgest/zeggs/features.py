@@ -34,7 +34,7 @@ import dataclasses
 import jax
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import rotations
 from jaxgest.motion.skeleton import Motion, Skeleton
 

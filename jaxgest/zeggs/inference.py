@@ -4,7 +4,7 @@
 (:func:`load_model` reads a workdir through :mod:`jaxgest.zeggs.workdir`):
 
 1. speech features of the audio at the model rate, normalised with the training statistics;
-2. each style clip is brought to the training rig at the model rate (:func:`jaxgest.motion.retarget.to_rig`:
+2. each style clip is brought to the training rig at the model rate (:func:`jaxgest.motion.body.to_rig`:
    itself on the same rig, otherwise through the 21-joint body joint maps with the feet on the floor), its
    pose features normalised and encoded by the style encoder (posterior mean and log-variance), then
    sampled with ``temperature`` (one key per clip, ``fold_in(key(seed), i)``);
@@ -30,12 +30,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.errors import DataError, JaxgestError
-from jaxgest.motion.retarget import to_rig
+from jaxgest.runtime.errors import DataError, JaxgestError
+from jaxgest.motion.body import to_rig
 from jaxgest.motion.skeleton import Motion
 from jaxgest.zeggs import features, quant
 from jaxgest.zeggs.generator import input_scale
-from jaxgest.zeggs.model import apply_fns
+from jaxgest.zeggs.model import apply_fns, calibrate
 from jaxgest.zeggs.style_encoder import sample_style
 from jaxgest.zeggs.workdir import TrainedWorkdir, load_workdir
 
@@ -102,14 +102,14 @@ class TrainedZeggs:
         s_emb = jnp.pad(s_emb, ((0, 0), (0, L - F), (0, 0)))
         if quant.check_format(weight_format) != "fp32":
             if weight_format not in self.quantized:
-                means = quant.calibrate(self.cfg.model, params, *self.calibration_inputs(params))
+                means = calibrate(self.cfg.model, params, *self.calibration_inputs(params))
                 self.quantized[weight_format] = quant.quantize_params(params, weight_format, input_means=means)
             params = self.quantized[weight_format]
         out = self.fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
         return {k: v[:, :F] for k, v in out.items()}
 
     def calibration_inputs(self, params, frames: int = 256) -> tuple:
-        """Generator inputs of the weight formats' bias correction (:func:`jaxgest.zeggs.quant.calibrate`):
+        """Generator inputs of the weight formats' bias correction (:func:`jaxgest.zeggs.model.calibrate`):
         the neutral request -- the mean speech frame (normalised features 0), style embedding 0 (the
         prior's mean), the mean pose, facing forward -- for ``frames`` frames; independent of any request."""
         m = self.cfg.model

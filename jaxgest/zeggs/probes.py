@@ -22,7 +22,7 @@ from typing import Optional
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 
 def _window_starts(frames: int, n: int, stride: int) -> list[int]:

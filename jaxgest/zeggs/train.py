@@ -22,11 +22,11 @@ from typing import Optional
 import jax
 import jax.numpy as jnp
 
-from jaxgest import parallel
-from jaxgest.errors import DataError, JaxgestError
+from jaxgest.runtime import parallel
+from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
-from jaxgest.training import (MetricsLogger, TrainState, bare_state, check_intervals, check_steps,
+from jaxgest.runtime.training import (MetricsLogger, TrainState, bare_state, check_intervals, check_steps,
                               jit_config_step, train_loop)
 from jaxgest.zeggs import data as zdata
 from jaxgest.zeggs import features
@@ -46,9 +46,9 @@ def config_for(preset: str, skeleton, overrides: Optional[dict] = None) -> Confi
 
 
 def _train_step(state, batch, key, stats, cfg: Config):
-    """One step of :func:`jaxgest.zeggs.steps.make_train_step` on a bare state (:func:`jaxgest.training.
+    """One step of :func:`jaxgest.zeggs.steps.make_train_step` on a bare state (:func:`jaxgest.runtime.training.
     bare_state`), the optimiser rebuilt from the static config: module-level, so jit's own cache serves every
-    training of one config in a process (:func:`jaxgest.training.jit_config_step`)."""
+    training of one config in a process (:func:`jaxgest.runtime.training.jit_config_step`)."""
     state, metrics = make_train_step(cfg)(state.replace(tx=make_optimizer(cfg)), batch, key, stats)
     return bare_state(state), metrics
 

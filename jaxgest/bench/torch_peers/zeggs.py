@@ -13,7 +13,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from benchmarks.torch_peers.common import tensor
+from jaxgest.bench.torch_peers.common import tensor
 
 
 # --------------------------------------------------------------------------------------------------------

@@ -7,7 +7,7 @@ cores (its intra-op pool uses every core of the process). Without torch the case
 
 * ``peer_tgst_transfer_b{1,8}``: the full transfer (content 1280 + style 1280 frames, both padded by the
   16 edge frames), ``transformer.variant="authors"`` (post-LN, one shared LayerNorm per block: the network
-  of the authors' code, which :class:`benchmarks.torch_peers.TGSTPeer` ports), random weights (seed 0),
+  of the authors' code, which :class:`jaxgest.bench.torch_peers.TGSTPeer` ports), random weights (seed 0),
   ``jit`` = :func:`jaxgest.tgst.model.transfer_arrays` vs ``torch``.
 * ``peer_zeggs_generate_b{1,32}``: the generator (paper preset, random LeCun-normal weights) over 300
   generated frames (60 in ``--quick``): ``jit`` (the model, fp32), ``bf16`` and ``int8``
@@ -30,12 +30,13 @@ import os
 import jax
 import numpy as np
 
-from benchmarks.cases import tgst as T
-from benchmarks.cases import zeggs as Z
-from benchmarks.harness import Case, Impl
+from jaxgest.bench.cases import tgst as T
+from jaxgest.bench.cases import zeggs as Z
+from jaxgest.bench.harness import Case, Impl
 from jaxgest.tgst import model as M
 from jaxgest.tgst.config import preset as tgst_config
 from jaxgest.zeggs import quant as Q
+from jaxgest.zeggs.model import calibrate
 from jaxgest.zeggs.generator import input_scale
 
 STYLE_FRAMES = 1280
@@ -122,7 +123,7 @@ def tgst_case(batch: int, frames: int = 1280, *, with_torch: bool = True, repeat
 
     impls = [Impl("jit", jax.jit(f), kind="jit")]
     if with_torch:
-        from benchmarks import torch_peers as P
+        from jaxgest.bench import torch_peers as P
 
         peer = {}
 
@@ -152,7 +153,7 @@ CALIBRATION_SEED, CALIBRATION_FRAMES = 1, 200  # the bias correction's calibrati
 
 @functools.lru_cache(maxsize=None)
 def _calibration():
-    return Q.calibrate(Z.CFG, Z._params(), *Z.generator_inputs(Z.CFG, 1, CALIBRATION_FRAMES,
+    return calibrate(Z.CFG, Z._params(), *Z.generator_inputs(Z.CFG, 1, CALIBRATION_FRAMES,
                                                                 seed=CALIBRATION_SEED))
 
 
@@ -188,7 +189,7 @@ def zeggs_case(batch: int, frames: int, *, with_torch: bool = True, formats=("bf
     for fmt in formats:
         impls.append(Impl(fmt, _format_fn(fmt), atol=FORMAT_ATOL, rtol=0.0))
     if with_torch:
-        from benchmarks import torch_peers as P
+        from jaxgest.bench import torch_peers as P
 
         P_ = cfg.pose_dim
         scale = np.asarray(input_scale(cfg, np.zeros(P_, np.float32), np.ones(P_, np.float32)))

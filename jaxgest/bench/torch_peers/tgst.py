@@ -20,7 +20,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 
-from benchmarks.torch_peers.common import tensor
+from jaxgest.bench.torch_peers.common import tensor
 
 
 # --------------------------------------------------------------------------------------------------------

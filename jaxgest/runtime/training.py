@@ -5,10 +5,10 @@ Every model (TGST autoencoder, TGST transformer, ZEGGS) trains through :func:`tr
 * the step is ``(state, batch, key) -> (state, metrics)``, jit-compiled once with the state donated;
 * the batch for step ``i`` is a pure function of ``(seed, i)`` (``batch_fn(i)``), so a run killed at any
   point and resumed from its last checkpoint ends with exactly the parameters of an uninterrupted run;
-* checkpoints are :class:`jaxgest.checkpoint.Checkpointer` (orbax, with a stored and checked model config;
+* checkpoints are :class:`jaxgest.runtime.checkpoint.Checkpointer` (orbax, with a stored and checked model config;
   re-exported here with the workdir format checks);
 * ``workdir/metrics.jsonl`` gets one JSON line per log step and ``workdir/config.json`` the config;
-* a non-finite loss stops training with :class:`~jaxgest.errors.TrainingError`, keeping the last good
+* a non-finite loss stops training with :class:`~jaxgest.runtime.errors.TrainingError`, keeping the last good
   checkpoint (nothing is saved after the bad step). Metrics are checked at every log or checkpoint step,
   and the parameters before every save (a NaN gradient with a still-finite loss is caught there), e.g.
   ``tgst autoencoder: non-finite loss at step 120; stopped, the last good checkpoint (step 100) is kept
@@ -31,11 +31,11 @@ import jax
 import numpy as np
 from flax.training.train_state import TrainState  # noqa: F401  (re-exported: the state every step uses)
 
-from jaxgest.checkpoint import Checkpointer, all_finite, strict_checkpoints, warn  # noqa: F401  (re-exported)
-from jaxgest.workdir_format import (FORMAT_VERSION, MODELS, check_workdir_config,  # noqa: F401  (re-exported)
+from jaxgest.runtime.checkpoint import Checkpointer, all_finite, strict_checkpoints, warn  # noqa: F401  (re-exported)
+from jaxgest.runtime.workdir_format import (FORMAT_VERSION, MODELS, check_workdir_config,  # noqa: F401  (re-exported)
                                     config_diff)
-from jaxgest.errors import TrainingError, WriteError
-from jaxgest.io import write_error, write_json_atomic  # noqa: F401  (write_json_atomic re-exported)
+from jaxgest.runtime.errors import TrainingError, WriteError
+from jaxgest.runtime.io import write_error, write_json_atomic  # noqa: F401  (write_json_atomic re-exported)
 
 __all__ = [
     "TrainState",
@@ -65,7 +65,7 @@ def make_update_step(loss_fn: LossFn, *, fold_in_step: bool = False):
     and the state's own optimiser (``state.tx``) applies the gradients (``TrainState.apply_gradients``:
     ``step + 1``, new params and optimiser state). With ``fold_in_step`` the key is first folded with the
     step count, so a stochastic loss (dropout, sampling) draws fresh noise every step from one run key.
-    The returned function is pure; :func:`jaxgest.parallel.parallelize_step` jits it with the state donated.
+    The returned function is pure; :func:`jaxgest.runtime.parallel.parallelize_step` jits it with the state donated.
     """
 
     def step(state: TrainState, batch, key: jax.Array):
@@ -91,14 +91,14 @@ def jit_config_step(step: Callable, mesh, cfg, *, extra_args: int = 0,
                     compiler_options: Optional[dict] = None) -> Callable:
     """``step(state, batch, key, *extra, cfg) -> (state, metrics)`` jit-compiled data-parallel over ``mesh``
     with ``cfg`` (a frozen, hashable config) a static argument, bound: returns ``(state, batch, key, *extra)
-    -> (state, metrics)`` with the shardings of :func:`jaxgest.parallel.parallelize_step` (state, key and the
+    -> (state, metrics)`` with the shardings of :func:`jaxgest.runtime.parallel.parallelize_step` (state, key and the
     ``extra_args`` further arguments replicated, batch split, state donated).
 
     ``step`` must be a module-level function and ``state`` a :func:`bare_state`: the cache key is then
     (step, config, shapes, shardings, compiler options) and jit's own cache serves every training of one
     config in a process (resume, tests) without tracing again; nothing is memoised here.
     """
-    from jaxgest import parallel
+    from jaxgest.runtime import parallel
 
     rep, data = parallel.replicated(mesh), parallel.data_sharding(mesh)
     jitted = jax.jit(step, in_shardings=(rep, data, rep) + (rep,) * extra_args, out_shardings=(rep, rep),

@@ -17,8 +17,8 @@ import shlex
 import subprocess
 import sys
 
-from jaxgest.errors import DataError
-from jaxgest.io import write_json_atomic
+from jaxgest.runtime.errors import DataError
+from jaxgest.runtime.io import write_json_atomic
 
 STAMP_KEYS = ("commit", "dirty", "version", "config", "command")
 

@@ -3,8 +3,8 @@
 This module imports ``torch`` at the top: only the benchmark suite imports it, and only when torch is
 installed (:func:`available`); ``jaxgest`` itself never does.
 
-TGST: :mod:`benchmarks.torch_peers.tgst` (:class:`TGSTPeer`, the authors' network); ZeroEGGS:
-:mod:`benchmarks.torch_peers.zeggs` (:class:`ZeggsPeer`, the official generator).
+TGST: :mod:`jaxgest.bench.torch_peers.tgst` (:class:`TGSTPeer`, the authors' network); ZeroEGGS:
+:mod:`jaxgest.bench.torch_peers.zeggs` (:class:`ZeggsPeer`, the official generator).
 
 Both run under ``torch.inference_mode()`` in float32 on the CPU with ``torch.set_num_threads`` set by the
 caller (:func:`set_threads`).
@@ -12,8 +12,8 @@ caller (:func:`set_threads`).
 
 from __future__ import annotations
 
-from benchmarks.torch_peers.common import set_threads
-from benchmarks.torch_peers.tgst import TGSTPeer, load_tgst, tgst_call
-from benchmarks.torch_peers.zeggs import ZeggsPeer, load_zeggs, zeggs_call
+from jaxgest.bench.torch_peers.common import set_threads
+from jaxgest.bench.torch_peers.tgst import TGSTPeer, load_tgst, tgst_call
+from jaxgest.bench.torch_peers.zeggs import ZeggsPeer, load_zeggs, zeggs_call
 
 __all__ = ["TGSTPeer", "ZeggsPeer", "load_tgst", "load_zeggs", "set_threads", "tgst_call", "zeggs_call"]

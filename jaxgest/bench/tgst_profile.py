@@ -1,7 +1,7 @@
 """Per-operation profile of the jitted TGST transfer (the peer case's network), no torch needed.
 
-``python -m benchmarks.tgst_profile [BATCH]`` (env ``N`` profiled calls, default 10; ``TOP`` ops listed,
-default 25): the authors' variant (``benchmarks.cases.peers.TCFG``), content 1280 + style 1280 frames,
+``python -m jaxgest.bench.tgst_profile [BATCH]`` (env ``N`` profiled calls, default 10; ``TOP`` ops listed,
+default 25): the authors' variant (``jaxgest.bench.cases.peers.TCFG``), content 1280 + style 1280 frames,
 random weights; runs ``N`` calls under ``jax.profiler.trace`` and sums each XLA operation's event time
 over XLA's threads (so on a busy machine the times include preemption). Prints the total per call, the
 time per part (autoencoder / transformer / swap, tokens, padding) and kind (conv or dot / YNNPACK fusion /
@@ -20,8 +20,8 @@ import tempfile
 import jax
 from jax._src.lib import _profile_data
 
-from benchmarks.cases import peers
-from benchmarks.cases import tgst as T
+from jaxgest.bench.cases import peers
+from jaxgest.bench.cases import tgst as T
 from jaxgest.tgst import model as M
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxgest.cli import add_train_arguments, training_data
-from jaxgest.errors import DataError
+from jaxgest.commands.common import add_train_arguments, training_data
+from jaxgest.runtime.errors import DataError
 from jaxgest.tgst.config import PRESETS, InferenceConfig
 from jaxgest.tgst.model import METHODS
 
@@ -53,7 +53,7 @@ def _train(args) -> int:
 
 
 def _transfer(args) -> int:
-    from jaxgest.io import check_output_path
+    from jaxgest.runtime.io import check_output_path
     from jaxgest.motion import bvh
     from jaxgest.tgst.api import load_model
 
@@ -73,10 +73,10 @@ def _transfer(args) -> int:
 
 
 def _evaluate(args) -> int:
-    from jaxgest.io import check_output_path
+    from jaxgest.runtime.io import check_output_path
     from jaxgest.tgst.evaluate import (diagnostics_table, evaluate, markdown_table, metric_validity,
                                        validity_table)
-    from jaxgest.training import write_json_atomic
+    from jaxgest.runtime.training import write_json_atomic
 
     check_output_path(args.json)
     methods = None if args.methods is None else tuple(m.strip() for m in args.methods.split(",") if m.strip())

@@ -1,7 +1,7 @@
 """The workdir format: its version, the models a workdir may hold, and the checks of a workdir's config.json.
 
 A workdir (or checkpoint meta) stamped with a newer ``format_version`` than :data:`FORMAT_VERSION` (absent = 1)
-or naming a model outside :data:`MODELS` is refused with a one-line :class:`~jaxgest.errors.CheckpointError`;
+or naming a model outside :data:`MODELS` is refused with a one-line :class:`~jaxgest.runtime.errors.CheckpointError`;
 :func:`config_diff` names the fields in which a stored config differs from a requested one.
 """
 
@@ -11,8 +11,8 @@ import json
 import pathlib
 from typing import Mapping, Optional
 
-from jaxgest.errors import CheckpointError
-from jaxgest.io import json_default
+from jaxgest.runtime.errors import CheckpointError
+from jaxgest.runtime.io import json_default
 
 __all__ = ["FORMAT_VERSION", "MODELS", "check_workdir_config", "config_diff", "normalise"]
 

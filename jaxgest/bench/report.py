@@ -159,7 +159,7 @@ def plot_scaling(records: list[dict], out_png, group: str | None = None) -> path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from jaxgest.io import atomic_output
+    from jaxgest.runtime.io import atomic_output
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=110)
     for (grp, impl), rows in sorted(series.items()):

@@ -5,7 +5,7 @@ written to a temporary file in the destination folder, given the permissions a n
 (``0666 & ~umask``), then renamed over the destination with ``os.replace``. On any error the temporary file
 is removed and the destination is untouched (a write killed outright leaves its hidden temporary file, which
 the next write to the same path removes); an error of the operating system (disk full, read-only folder,
-no permission) becomes a one-line :class:`~jaxgest.errors.WriteError` naming the file.
+no permission) becomes a one-line :class:`~jaxgest.runtime.errors.WriteError` naming the file.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import tempfile
 
 import numpy as np
 
-from jaxgest.errors import DataError, WriteError
+from jaxgest.runtime.errors import DataError, WriteError
 
 
 TMP_MARK = "jaxgest-tmp-"  # temporary files are ``.<stem>.jaxgest-tmp-<pid>-<random><suffix>``

@@ -15,7 +15,7 @@
 Each call is one full step ``(state, batch, key) -> (state, metrics)`` on the same input state (no buffer
 donation, so repeated calls are independent); ``frames`` is the target window and ``per_pose_us`` the
 step time per target frame in the batch. Random weights (``init`` of the model, or LeCun-normal random
-for ZEGGS, see :func:`benchmarks.cases.zeggs.random_params`) and random inputs of the right shapes.
+for ZEGGS, see :func:`jaxgest.bench.cases.zeggs.random_params`) and random inputs of the right shapes.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 import optax
 from flax.training.train_state import TrainState
 
-from benchmarks.harness import Case, Impl
+from jaxgest.bench.harness import Case, Impl
 from jaxgest.tgst import model as TM
 from jaxgest.tgst import steps as TS
 from jaxgest.tgst.config import preset as tgst_config
@@ -106,7 +106,7 @@ def zeggs_batch(cfg, batch: int, window: int, style_frames: int, seed: int = 3) 
 
 
 def zeggs_train_case(preset: str, *, quick: bool) -> Case:
-    from benchmarks.cases.zeggs import random_params
+    from jaxgest.bench.cases.zeggs import random_params
 
     cfg = zeggs_config(preset)
     tx = ZS.make_optimizer(cfg)

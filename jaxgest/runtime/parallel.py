@@ -23,7 +23,7 @@ Use from the model training code (``state`` a ``TrainState``, ``step_fn`` the *u
 Global batch. The batch size of a config is the GLOBAL batch: one optimizer step averages the loss over
 that many examples whatever the number of devices, so a run on N devices follows the 1-device run. Each
 device holds ``batch / N`` examples (the batch must be divisible by N, otherwise :func:`shard_batch` raises
-a :class:`~jaxgest.errors.JaxgestError` naming the array). With several hosts, each host holds only
+a :class:`~jaxgest.runtime.errors.JaxgestError` naming the array). With several hosts, each host holds only
 ``batch / num_hosts`` examples on its devices. Two ways to feed it: (a) ``batch_fn`` returns the global
 batch on every host (cheap for in-memory or generated data) and :func:`shard_batch` keeps this host's block;
 (b) to *read* only its own share, ``batch_fn`` draws the global batch's example indices from ``(seed, i)``
@@ -64,7 +64,7 @@ import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from jaxgest.errors import JaxgestError
+from jaxgest.runtime.errors import JaxgestError
 
 __all__ = [
     "DATA_AXIS",
@@ -240,7 +240,7 @@ def host_shard(x, process_index: Optional[int] = None, process_count: Optional[i
 
 def sharded_batch_fn(batch_fn: Callable[[int], Any], mesh: Mesh, *,
                      host_local: bool = False) -> Callable[[int], Any]:
-    """``i -> `` the batch of step ``i`` on the mesh, for :func:`jaxgest.training.train_loop`.
+    """``i -> `` the batch of step ``i`` on the mesh, for :func:`jaxgest.runtime.training.train_loop`.
 
     ``batch_fn(i)`` returns the global batch (default; :func:`shard_batch`) or, with ``host_local=True``,
     only this host's block of it (:func:`host_local_batch_to_global`; same as the default on one host).

@@ -1,6 +1,6 @@
 """Why a checkpoint cannot be read or written, in one line, and the content digest that catches corruption.
 
-Used by :class:`jaxgest.checkpoint.Checkpointer`: :class:`Unreadable` marks a checkpoint step that cannot be
+Used by :class:`jaxgest.runtime.checkpoint.Checkpointer`: :class:`Unreadable` marks a checkpoint step that cannot be
 read, :func:`read_reason` / :func:`write_reason` turn orbax/tensorstore/OS errors into a short reason,
 :func:`digest` is the sha256 of a pytree's arrays stored in each checkpoint's meta, :func:`tree_shapes`
 compares stored and requested structures.

@@ -1,6 +1,6 @@
 """Weight formats of the ZeroEGGS generator against its fp32 jit, interleaved rounds (no torch needed).
 
-``python -m benchmarks.zeggs_formats [BATCH]`` (env ``T`` generated frames, default 60; ``ROUNDS``, default
+``python -m jaxgest.bench.zeggs_formats [BATCH]`` (env ``T`` generated frames, default 60; ``ROUNDS``, default
 7): the paper preset with the benchmark's random weights, ``fp32`` (the model, jit), ``bf16``, ``int8``
 (with its C++ kernel at batch <= 4 when available, rows split over XLA's intra-op pool), ``int8_1t`` (the
 kernel on the calling thread only) and ``int8_xla`` (the same params traced with the kernel switched off),
@@ -17,9 +17,9 @@ import time
 import jax
 import numpy as np
 
-from benchmarks.cases import peers
-from benchmarks.cases import zeggs as Z
-from jaxgest.zeggs import int8_kernel
+from jaxgest.bench.cases import peers
+from jaxgest.bench.cases import zeggs as Z
+from jaxgest.kernels import int8_kernel
 
 
 def main(batch: int = 1, frames: int = 60, rounds: int = 7) -> dict:

@@ -46,7 +46,7 @@ from typing import Any, Callable, Optional, Sequence
 import jax
 import numpy as np
 
-from benchmarks.machine import floor
+from jaxgest.bench.machine import floor
 
 # The SPEC §8 record (key -> allowed JSON types), and the extra fields this harness adds.
 RECORD_FIELDS: dict[str, tuple] = {
@@ -323,7 +323,7 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
              budget_s: float = 20.0, log: Callable[[str], None] = print, probe: Optional[dict] = None) -> list[dict]:
     """Prepare every implementation (compile, one call), check they agree, then time each; one record each.
 
-    ``probe``: this run's :func:`benchmarks.machine.probe_machine`, for each record's floor fraction (nulls
+    ``probe``: this run's :func:`jaxgest.bench.machine.probe_machine`, for each record's floor fraction (nulls
     without one).
 
     Raises :class:`EqualityError` (before any steady-state timing) when an implementation disagrees.

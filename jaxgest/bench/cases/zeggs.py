@@ -8,7 +8,7 @@ depend on the values). Inputs are random speech embeddings / pose features / a u
 
 * ``zeggs_generate_check_b{1,32}``: the generator on a short sequence (8 generated frames), ``jit`` vs
   eager JAX (``jax.disable_jit``: flax's scan runs as a Python loop of op-by-op calls) vs the NumPy
-  reference (:mod:`benchmarks.numpy_zeggs`) -- the equality check of the generator.
+  reference (:mod:`jaxgest.bench.numpy_zeggs`) -- the equality check of the generator.
 * ``zeggs_generate_b1`` / ``zeggs_generate_b32``: :meth:`ZeggsModel.generate` (hidden-state initializer +
   one ``nn.scan`` over the frames) generating ``frames`` frames (300 = 5 s at 60 fps; 60 in ``--quick``)
   after warm-up, ``jit`` (and NumPy at batch 1 in the full run). ``per_pose_us`` is per generated frame
@@ -29,8 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks import numpy_zeggs
-from benchmarks.harness import Case, Impl
+from jaxgest.bench import numpy_zeggs
+from jaxgest.bench.harness import Case, Impl
 from jaxgest.zeggs.config import ModelConfig, preset
 from jaxgest.zeggs.model import ZeggsModel, init_params
 

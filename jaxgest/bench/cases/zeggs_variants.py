@@ -33,8 +33,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from benchmarks.cases.zeggs import CFG, _generate_fn, _params, generator_inputs
-from benchmarks.harness import Case, Impl
+from jaxgest.bench.cases.zeggs import CFG, _generate_fn, _params, generator_inputs
+from jaxgest.bench.harness import Case, Impl
 from jaxgest.zeggs.config import ModelConfig
 from jaxgest.zeggs.generator import HiddenStateInitializer, local_facing, update_character_state
 
@@ -139,7 +139,7 @@ def variants_case(batch: int, frames: int) -> Case:
     impls += [Impl(name, jax.jit(make_variant(CFG, **VARIANTS[name])), kind="jit") for name in TIMED]
     return Case(name=f"zeggs_variants_b{batch}", batch=batch, frames=frames, impls=impls,
                 make_args=lambda: (_params(),) + generator_inputs(CFG, batch, frames), rtol=1e-3, atol=1e-3,
-                quick=False, group="", note="benchmark-local generator variants (see benchmarks/cases/"
+                quick=False, group="", note="benchmark-local generator variants (see jaxgest/bench/cases/"
                                             "zeggs_variants.py); jit = the model's generate")
 
 

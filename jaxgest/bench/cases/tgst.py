@@ -13,8 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks import numpy_tgst
-from benchmarks.harness import Case, Impl
+from jaxgest.bench import numpy_tgst
+from jaxgest.bench.harness import Case, Impl
 from jaxgest.tgst import model as M
 from jaxgest.tgst.config import preset
 

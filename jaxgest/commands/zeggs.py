@@ -5,8 +5,8 @@ from __future__ import annotations
 import json
 import pathlib
 
-from jaxgest.cli import add_train_arguments, training_data
-from jaxgest.errors import JaxgestError
+from jaxgest.commands.common import add_train_arguments, training_data
+from jaxgest.runtime.errors import JaxgestError
 
 
 def register(subparsers) -> None:
@@ -132,7 +132,7 @@ def _parse_weights(text):
 
 
 def _generate(args) -> int:
-    from jaxgest.io import check_output_path
+    from jaxgest.runtime.io import check_output_path
     from jaxgest.motion import bvh
     from jaxgest.zeggs.inference import load_model
     from jaxgest.zeggs.pca import parse_edits
@@ -173,7 +173,7 @@ def _pca(args) -> int:
 
 
 def _evaluate(args) -> int:
-    from jaxgest.io import check_output_path, write_text_atomic
+    from jaxgest.runtime.io import check_output_path, write_text_atomic
     from jaxgest.zeggs.evaluate import evaluate, markdown
 
     out = check_output_path(args.json)

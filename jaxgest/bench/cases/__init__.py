@@ -2,14 +2,14 @@
 
 How to add a case
 -----------------
-1. Create (or extend) a module here, e.g. ``benchmarks/cases/zeggs.py``, defining
-   ``cases(quick: bool) -> list[benchmarks.harness.Case]``. Nothing else needs registering: modules are
+1. Create (or extend) a module here, e.g. ``jaxgest/bench/cases/zeggs.py``, defining
+   ``cases(quick: bool) -> list[jaxgest.bench.harness.Case]``. Nothing else needs registering: modules are
    discovered by :func:`all_cases` in alphabetical order (``_``-prefixed modules are skipped).
-2. Build each :class:`~benchmarks.harness.Case` with ``name`` (unique, used by ``--cases``), ``batch``,
+2. Build each :class:`~jaxgest.bench.harness.Case` with ``name`` (unique, used by ``--cases``), ``batch``,
    ``frames`` (``poses`` if a call produces something other than batch x frames poses), ``impls`` and
    ``make_args`` -- a function returning the argument tuple passed to every implementation (weights and
    inputs built once; every implementation gets the same weights).
-3. Implementations are :class:`~benchmarks.harness.Impl`: ``Impl("jit", jax.jit(f), kind="jit")`` (trace
+3. Implementations are :class:`~jaxgest.bench.harness.Impl`: ``Impl("jit", jax.jit(f), kind="jit")`` (trace
    / lower / compile timed apart; bind static arguments with ``functools.partial`` before ``jax.jit``),
    ``Impl("eager", f_under_disable_jit)``, ``Impl("numpy", reference)``. Name them ``jit`` / ``eager`` /
    ``numpy`` so the report computes eager/jit and numpy/jit. The first implementation is the reference of

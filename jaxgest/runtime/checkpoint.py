@@ -3,19 +3,19 @@
 :class:`Checkpointer` wraps an orbax ``CheckpointManager`` over ``workdir/<subdir>`` keeping
 ``{params, opt_state, step}`` plus a JSON ``meta`` item holding the kind of model, its config and the
 skeleton signature; restoring with a different one stops with a one-line
-:class:`~jaxgest.errors.CheckpointError` that names the differing fields. Faults of the environment are one
+:class:`~jaxgest.runtime.errors.CheckpointError` that names the differing fields. Faults of the environment are one
 line: a checkpoint that cannot be read (truncated, corrupted -- each stores a sha256 of its arrays -- or
 missing files) is skipped for the newest readable one with a one-line warning (:func:`strict_checkpoints` /
 ``--strict``: an error instead), a save that cannot complete (disk full, read-only) is a
-:class:`~jaxgest.errors.WriteError` with no partial folder left, and a workdir or checkpoint stamped with a
-newer ``format_version`` or naming an unknown model is refused (:mod:`jaxgest.workdir_format`).
+:class:`~jaxgest.runtime.errors.WriteError` with no partial folder left, and a workdir or checkpoint stamped with a
+newer ``format_version`` or naming an unknown model is refused (:mod:`jaxgest.runtime.workdir_format`).
 
 No process-wide side effects: absl logging is quietened only around the orbax calls that log expected
-noise (:func:`jaxgest.orbax_noise.quiet_absl`), and the filter of asyncio's "Event loop is closed" errors
-(:func:`jaxgest.orbax_noise.closed_loop_errors_muted`) is installed while a Checkpointer is open and removed by
+noise (:func:`jaxgest.runtime.orbax_noise.quiet_absl`), and the filter of asyncio's "Event loop is closed" errors
+(:func:`jaxgest.runtime.orbax_noise.closed_loop_errors_muted`) is installed while a Checkpointer is open and removed by
 :meth:`Checkpointer.close` (the command line installs it for the whole command, see :mod:`jaxgest.cli`).
 
-The one-line reasons and the content digest are in :mod:`jaxgest.checkpoint_faults`.
+The one-line reasons and the content digest are in :mod:`jaxgest.runtime.checkpoint_faults`.
 
 References: STYLE.md (flax examples' orbax usage).
 """
@@ -33,10 +33,10 @@ from typing import Any, Callable, Iterable, Mapping, Optional
 import jax
 import numpy as np
 
-from jaxgest.checkpoint_faults import Unreadable, digest, flat, read_reason, tree_shapes, write_reason
-from jaxgest.errors import CheckpointError, WriteError
-from jaxgest.orbax_noise import closed_loop_errors_muted, quiet_absl
-from jaxgest.workdir_format import FORMAT_VERSION, check_workdir_config, config_diff, normalise
+from jaxgest.runtime.checkpoint_faults import Unreadable, digest, flat, read_reason, tree_shapes, write_reason
+from jaxgest.runtime.errors import CheckpointError, WriteError
+from jaxgest.runtime.orbax_noise import closed_loop_errors_muted, quiet_absl
+from jaxgest.runtime.workdir_format import FORMAT_VERSION, check_workdir_config, config_diff, normalise
 
 __all__ = [
     "Checkpointer",

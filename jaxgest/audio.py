@@ -11,7 +11,7 @@ NumPy + scipy.signal, which librosa already depends on), as the authors' pipelin
 audio below the -70 LUFS gate (silence) is left as it is.
 
 References: Ghorbani et al. 2023, §3.1 and §4.1 (log-amplitude mel spectrogram, 80 channels, total frame
-energy, FFT Hanning window of 50 ms, hop 12.5 ms, resampled to the animation rate, normalised); SPEC §4
+energy, FFT Hanning window of 50 ms, hop 12.5 ms, resampled to the animation rate, normalised); docs/design.md §4
 (the authors' code: fmin 20 Hz, fmax 7600 Hz, pyloudnorm to -20 LUFS); ITU-R BS.1770-4 (loudness).
 """
 
@@ -128,7 +128,7 @@ def normalize_loudness(y: np.ndarray, sr: float, target_lufs: float = LOUDNESS_L
 
     Audio whose loudness is below the absolute gate (silence, DC, near-silence) is returned unchanged, so
     its features stay finite. The authors' data pipeline normalises every recording to -20 LUFS before
-    feature extraction. References: ITU-R BS.1770-4; SPEC §4.
+    feature extraction. References: ITU-R BS.1770-4; docs/design.md §4.
     """
     y = np.asarray(y, np.float32)
     loud = integrated_loudness(y, sr) if y.size else -np.inf

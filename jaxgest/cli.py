@@ -1,4 +1,4 @@
-"""The ``jaxgest`` command line (SPEC §6). Thin: parse, then call the api modules.
+"""The ``jaxgest`` command line (docs/design.md §6). Thin: parse, then call the api modules.
 
 Each command group lives in :mod:`jaxgest.commands` and exposes ``register(subparsers)``; the registered parser
 sets ``func`` to a callable ``func(args) -> int | None``. Every :class:`jaxgest.runtime.errors.JaxgestError`, and

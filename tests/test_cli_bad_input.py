@@ -351,7 +351,7 @@ def test_checkpoint_of_another_preset(ctx, capsys, tmp_path, model):
     work = tmp_path / "w"
     shutil.copytree(ctx["tw" if model == "tgst" else "zw"], work)
     before = {p: p.read_bytes() for p in work.rglob("*") if p.is_file()}
-    other = "fit" if model == "tgst" else "paper"  # TGST's paper preset has the tiny one's networks
+    other = "fit-motion" if model == "tgst" else "paper"  # TGST's paper preset has the tiny one's networks
     rc, msg = run_cli([model, "train", "--data", ctx["data"], "--workdir", work, "--preset", other,
                        "--steps", "0"], capsys)
     assert rc == 2 and "checkpoint does not match the requested model" in msg

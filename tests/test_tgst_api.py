@@ -48,7 +48,7 @@ def test_train_writes_config_metrics_checkpoints(trained):
 
 
 def test_resume_continues_from_saved_steps(trained, tmp_path):
-    from jaxgest.tgst.train import train
+    from jaxgest.tgst.trainer import train
 
     data, work, _ = trained
     copy = tmp_path / "w"
@@ -63,7 +63,7 @@ def test_training_again_in_one_process_reuses_the_compiled_steps(trained, tmp_pa
     """jit's own cache serves every training of one config in a process (no memo of jitted steps in
     tgst/train.py): over two trainings into fresh workdirs each stage's step is traced at most once (none when
     the session's training already traced it), i.e. the second training traces nothing."""
-    from jaxgest.tgst import train as tgst_train
+    from jaxgest.tgst import trainer as tgst_train
 
     data = trained[0]
     traces = []
@@ -79,22 +79,22 @@ def test_training_again_in_one_process_reuses_the_compiled_steps(trained, tmp_pa
 
 
 def test_another_model_on_same_workdir_is_refused(trained, tmp_path):
-    """fit has other networks than tiny (standardised autoencoder, no token positions): refused. paper has the
+    """fit-motion has other networks than tiny (standardised autoencoder, no token positions): refused. paper has the
     same networks and other training settings only, which a workdir may change."""
-    from jaxgest.tgst.train import train
+    from jaxgest.tgst.trainer import train
 
     data, work, _ = trained
     copy = tmp_path / "w"
     shutil.copytree(work, copy)
     before = (copy / "config.json").read_text()
     with pytest.raises(CheckpointError, match="does not match"):
-        train(data, copy, preset="fit", ae_steps=1, transformer_steps=1, progress=False)
+        train(data, copy, preset="fit-motion", ae_steps=1, transformer_steps=1, progress=False)
     assert (copy / "config.json").read_text() == before  # nothing overwritten
 
 
 def test_ablation_validated():
     from jaxgest.tgst.config import preset
-    from jaxgest.tgst.train import apply_ablation
+    from jaxgest.tgst.trainer import apply_ablation
 
     cfg = apply_ablation(preset("tiny"), ["cyclic", "structure"])
     t = cfg.train.transformer
@@ -209,24 +209,23 @@ def test_cli_errors_are_one_line(trained, tmp_path, capsys):
     assert not (tmp_path / "o.bvh").exists()
 
 
-def test_model_cache_reloads_only_when_a_checkpoint_step_changes(trained, tmp_path):
-    from jaxgest.tgst.api import ModelCache, load_model
-    from jaxgest.tgst.train import train
+def test_a_loaded_model_owns_its_compiled_functions_and_takes_paths(trained, tmp_path):
+    """load() reads the workdir on every call; each model keeps its own jit per method (no module-level
+    cache), reused by later transfers; transfer takes BVH paths as well as Motions."""
+    from jaxgest.tgst.api import load
 
     data, work, _ = trained
-    copy = tmp_path / "w"
-    shutil.copytree(work, copy)
-    assert load_model(copy) is not load_model(copy)  # load_model itself keeps nothing
-    cache = ModelCache()
-    first = cache.get(copy)
-    assert cache.get(copy) is first and first.steps == {"autoencoder": 4, "transformer": 4}
-    (copy / "config.json").touch()  # a newer config.json alone is no reason to reload
-    assert cache.get(copy) is first
-    train(data, copy, preset="tiny", ae_steps=4, transformer_steps=6, progress=False, log_every=2, ckpt_every=2)
-    again = cache.get(copy)  # the transformer has a new step: reloaded
-    assert again is not first and again.steps["transformer"] == 6
-    flat = lambda m: np.concatenate([np.ravel(x) for x in jax.tree_util.tree_leaves(m.params["transformer"])])
-    assert not np.allclose(flat(again), flat(first))
+    model = load(work)
+    other = load(work)
+    assert model is not other and model.steps == {"autoencoder": 4, "transformer": 4}
+    assert model.compiled("soft") is model.compiled("soft")
+    assert model.compiled("soft") is not other.compiled("soft") and model.compiled("hard") is not model.compiled("soft")
+    clips = sorted(data.glob("*.bvh"))[:2]
+    from_paths = model.transfer(clips[0], str(clips[1]), method="soft")
+    from_motions = model.transfer(bvh.load(clips[0]), bvh.load(clips[1]), method="soft")
+    np.testing.assert_array_equal(from_paths.rotations, from_motions.rotations)
+    with pytest.raises(DataError, match="style: expected a Motion or a BVH path, got int"):
+        model.transfer(clips[0], 3)
 
 
 def _legacy_flat(cfg) -> dict:
@@ -278,7 +277,7 @@ def test_training_the_autoencoder_further_retrains_a_stale_transformer(trained, 
     another name (nothing lost) and a fresh one is trained on the new autoencoder."""
     import shutil
 
-    from jaxgest.tgst.train import format_summary, train
+    from jaxgest.tgst.trainer import format_summary, train
 
     data, work0, _ = trained
     work = tmp_path / "w"

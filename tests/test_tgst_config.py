@@ -47,16 +47,33 @@ def test_autoencoder_layer_sizes_and_shapes():
     assert up.shape == (2, 64, 39) and lo.shape == (2, 64, 24)
 
 
-def test_config_json_round_trip_and_validation():
-    from jaxgest.tgst.config import PRESETS
-    from jaxgest.tgst.train import DEFAULT_STEPS
+# The presets retired from the registry, as fit-motion + overrides (the experiment configs use these)
+FIT_SMOOTH = {"train.autoencoder.expmap_branch": "principal", "train.autoencoder.trunk_weight": 1.0,
+              "train.autoencoder.position_velocity_weight": 0.0, "train.autoencoder.lr_decay_steps": 6000,
+              "train.autoencoder.steps": 1000}
+FIT_PCA = {**FIT_SMOOTH, "model.autoencoder.linear_context": 0, "train.autoencoder.learning_rate": 1e-3,
+           "train.autoencoder.init_velocity_weight": 0.0, "train.autoencoder.velocity_weight": 0.0,
+           "train.autoencoder.steps": 6000}
+FIT = {**FIT_PCA, "model.autoencoder.linear_path": False}
 
-    assert set(PRESETS) == set(DEFAULT_STEPS)
+
+def retired(overrides: dict) -> Config:
+    from jaxgest.tgst.trainer import apply_overrides
+
+    return apply_overrides(preset("fit-motion"), overrides)
+
+
+def test_config_json_round_trip_and_validation():
+    from jaxgest.runtime.errors import JaxgestError
+    from jaxgest.tgst.config import PRESETS
+
+    assert list(PRESETS) == ["paper", "fit-motion", "tiny"]
     for name in PRESETS:
         cfg = preset(name)
+        assert cfg.train.autoencoder.steps > 0 and cfg.train.transformer.steps > 0  # steps live in the config
         assert Config.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
         hash(cfg), hash(cfg.model)  # usable as jit static arguments
-    with pytest.raises(ValueError):
+    with pytest.raises(JaxgestError, match="unknown TGST preset 'huge' \\(choose from paper, fit-motion, tiny\\)"):
         preset("huge")
     with pytest.raises(ValueError, match="block_size"):
         ModelConfig(transformer=dataclasses.replace(TINY.model.transformer, block_size=8))
@@ -81,33 +98,39 @@ def test_flat_config_of_older_versions_maps_to_the_split_with_old_defaults():
 
 def test_apply_overrides_reaches_sub_configs_and_rejects_bad_values():
     from jaxgest.runtime.errors import JaxgestError
-    from jaxgest.tgst.train import apply_overrides
+    from jaxgest.tgst.trainer import apply_overrides
 
-    cfg = apply_overrides(preset("fit"), {"swap_similarity": "scaled", "transformer.token_positions": "index",
-                                          "model.autoencoder.standardize": False, "train.autoencoder.window": 32,
-                                          "ae_batch_size": 2})
+    cfg = apply_overrides(preset("fit-motion"), {"model.swap_similarity": "scaled",
+                                                 "model.transformer.token_positions": "index",
+                                                 "model.autoencoder.standardize": False,
+                                                 "train.autoencoder.window": 32, "train.autoencoder.batch_size": 2})
     m = cfg.model
     assert m.swap_similarity == "scaled" and m.transformer.token_positions == "index"
     assert not m.autoencoder.standardize and m.edge_frames == 16
     assert cfg.train.autoencoder.window == 32 and cfg.train.autoencoder.batch_size == 2
     assert apply_overrides(TINY, None) == TINY
     with pytest.raises(JaxgestError, match="override"):
-        apply_overrides(TINY, {"swap_similarity": "cosine"})
-    with pytest.raises(JaxgestError, match="no field 'widht'"):
+        apply_overrides(TINY, {"model.swap_similarity": "cosine"})
+    with pytest.raises(JaxgestError, match="unknown TGST config field 'train.autoencoder.widht' "
+                                           "\\(closest: train.autoencoder.window"):
         apply_overrides(TINY, {"train.autoencoder.widht": 3})
+    with pytest.raises(JaxgestError, match="closest: model.swap_similarity"):  # one syntax: the dotted path
+        apply_overrides(TINY, {"swap_similarity": "scaled"})
+    with pytest.raises(JaxgestError, match="expected a float"):
+        apply_overrides(TINY, {"train.autoencoder.learning_rate": "fast"})
     with pytest.raises(JaxgestError, match="trunk_weight must be >= 1"):
         apply_overrides(TINY, {"train.autoencoder.trunk_weight": 0.5})
-    with pytest.raises(JaxgestError, match="is a section"):
+    with pytest.raises(JaxgestError, match="a section"):
         apply_overrides(TINY, {"model.autoencoder": 3})
     with pytest.raises(JaxgestError, match="expmap_branch must be one of"):
         apply_overrides(TINY, {"train.autoencoder.expmap_branch": "nearest"})
     assert apply_overrides(TINY, {"train.autoencoder.expmap_branch": "rest"}).train.autoencoder.expmap_branch == "rest"
     # fields that must agree are changed together and checked once: a wider latent and its token width
-    wide = apply_overrides(preset("fit"), {"model.autoencoder.encoder_channels": (64, 32, 32),
+    wide = apply_overrides(retired(FIT), {"model.autoencoder.encoder_channels": (64, 32, 32),
                                            "model.transformer.token_dim": 128})
     assert wide.model.autoencoder.latent_dim == 32 and wide.model.transformer.token_dim == 128
     with pytest.raises(JaxgestError, match="token_dim"):
-        apply_overrides(preset("fit"), {"model.autoencoder.encoder_channels": (64, 32, 32)})
+        apply_overrides(retired(FIT), {"model.autoencoder.encoder_channels": (64, 32, 32)})
 
 
 def test_checkpoints_check_only_the_model_config(tmp_path):
@@ -151,55 +174,57 @@ def test_checkpoints_check_only_the_model_config(tmp_path):
     with pytest.raises(CheckpointError, match="linear_path"):
         check(tmp_path / "before", dataclasses.replace(
             TINY.model, autoencoder=dataclasses.replace(TINY.model.autoencoder, linear_path=True)))
-    fit_pca = preset("fit-pca").model  # a fit-pca checkpoint of the version before linear_context
+    fit_pca = retired(FIT_PCA).model  # a fit-pca checkpoint of the version before linear_context
     no_context = fit_pca.autoencoder_dict()
     no_context["autoencoder"].pop("linear_context")
     save(tmp_path / "fit-pca", json.loads(json.dumps(no_context)))
     check(tmp_path / "fit-pca", fit_pca)
     with pytest.raises(CheckpointError, match="linear_context"):
-        check(tmp_path / "fit-pca", preset("fit-smooth").model)
+        check(tmp_path / "fit-pca", retired(FIT_SMOOTH).model)
 
 
 def test_fit_pca_preset_is_fit_with_the_linear_path_and_paper_stays_the_papers():
-    fit, fp, paper = preset("fit"), preset("fit-pca"), preset("paper")
+    fit, fp, paper = retired(FIT), retired(FIT_PCA), preset("paper")
     assert not paper.model.autoencoder.linear_path and paper.model.autoencoder.latent_activation
     assert fp.model.autoencoder == dataclasses.replace(fit.model.autoencoder, linear_path=True)
-    assert dataclasses.replace(fp, name="fit", model=fit.model) == fit
+    assert dataclasses.replace(fp, model=fit.model) == fit
     assert fp.train.autoencoder.pca_init
-    assert api.count_params("fit-pca")["autoencoder"] - api.count_params("fit")["autoencoder"] == \
+    assert api.count_params(fp)["autoencoder"] - api.count_params(fit)["autoencoder"] == \
         (4 * 39 * 16 + 16) + (16 * 4 * 39 + 4 * 39) + (16 * 4 * 24 + 4 * 24)
     assert Config.from_dict(json.loads(json.dumps(fp.to_dict()))) == fp
 
 
 def test_fit_smooth_preset_is_fit_with_the_lapped_linear_path_and_leaves_the_others_unchanged():
-    fit, fp, fs = preset("fit"), preset("fit-pca"), preset("fit-smooth")
+    fit, fp, fs = retired(FIT), retired(FIT_PCA), retired(FIT_SMOOTH)
     assert fs.model.autoencoder == dataclasses.replace(fit.model.autoencoder, linear_path=True, linear_context=1)
     assert fs.model == dataclasses.replace(fit.model, autoencoder=fs.model.autoencoder)
     assert fs.train.autoencoder.init_velocity_weight > 0 and fs.train.autoencoder.pca_init
     assert fp.model.autoencoder.linear_context == 0 and fp.train.autoencoder.velocity_weight == 0
     assert fit.train.autoencoder.velocity_weight == 0 and fit.train.autoencoder.init_velocity_weight == 0
     # lapped: encoder kernel 3 blocks of 4 frames, decoders over 3 latent frames
-    assert api.count_params("fit-smooth")["autoencoder"] - api.count_params("fit")["autoencoder"] == \
+    assert api.count_params(fs)["autoencoder"] - api.count_params(fit)["autoencoder"] == \
         (12 * 39 * 16 + 16) + (3 * 16 * 4 * 39 + 4 * 39) + (3 * 16 * 4 * 24 + 4 * 24)
     assert Config.from_dict(json.loads(json.dumps(fs.to_dict()))) == fs
 
 
 def test_fit_motion_preset_is_fit_smooth_with_its_training_options_and_every_preset_has_default_steps():
+    from jaxgest.runtime.errors import JaxgestError
     from jaxgest.tgst.config import PRESETS
-    from jaxgest.tgst.train import DEFAULT_STEPS
 
-    fs, fm = preset("fit-smooth"), preset("fit-motion")
+    fs, fm = retired(FIT_SMOOTH), preset("fit-motion")
     assert fm.model == fs.model  # the same network: only how it is trained differs
     assert fm.train.transformer == fs.train.transformer
     assert fm.train.autoencoder == dataclasses.replace(
         fs.train.autoencoder, expmap_branch="rest", trunk_weight=4.0, position_velocity_weight=0.15,
-        lr_decay_steps=500)
+        lr_decay_steps=500, steps=500)
     assert fs.train.autoencoder.expmap_branch == "principal" and fs.train.autoencoder.trunk_weight == 1.0
     # the paper preset keeps the paper's exp-maps; tiny (tests, demo) trains on the rest branch: its synthetic
     # rig's upper legs also rest at pi
     assert preset("paper").train.autoencoder.expmap_branch == "principal"
     assert preset("tiny").train.autoencoder.expmap_branch == "rest"
     assert Config.from_dict(json.loads(json.dumps(fm.to_dict()))) == fm
-    assert set(DEFAULT_STEPS) == set(PRESETS) and all(preset(n).name == n for n in PRESETS)
-    with pytest.raises(ValueError, match="fit-motion"):
+    assert all(preset(n).name == n for n in PRESETS)
+    steps = {n: (preset(n).train.autoencoder.steps, preset(n).train.transformer.steps) for n in PRESETS}
+    assert steps == {"paper": (10_000, 10_000), "fit-motion": (500, 10_000), "tiny": (200, 200)}
+    with pytest.raises(JaxgestError, match="fit-motion"):
         preset("fit-moton")

@@ -18,7 +18,7 @@ from jaxgest.tgst.losses import transformer_loss_terms
 from jaxgest.tgst.steps import create_transformer_state, make_transformer_train_step
 from jaxgest.tgst.tokens import tokenize
 from jaxgest.tgst.transformer import StyleTransformerEncoder
-from jaxgest.tgst.train import apply_overrides
+from jaxgest.tgst.trainer import apply_overrides
 
 from tgst_testing import CFG, FULL, random_params, smooth_motion
 

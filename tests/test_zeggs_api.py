@@ -51,7 +51,7 @@ def test_api_matches_spec():
 
 
 def test_training_writes_everything_and_resumes(trained, copy_workdir):
-    from jaxgest.zeggs.train import train
+    from jaxgest.zeggs.trainer import train
 
     data, work, summary = trained
     for name in ("config.json", "metrics.jsonl", "pose_stats.json", "speech_stats.json", "reference.bvh"):
@@ -62,14 +62,15 @@ def test_training_writes_everything_and_resumes(trained, copy_workdir):
     # training and inference settings may change on resume (the checkpoint carries the model config only)
     work = copy_workdir(work)
     again = train(data, work, preset="tiny", steps=8, progress=False, log_every=2, ckpt_every=2,
-                  overrides={"learning_rate": 2e-3, "style_sampling": "overlap", "temperature": 0.5})
+                  overrides={"train.learning_rate": 2e-3, "train.style_sampling": "overlap",
+                             "inference.temperature": 0.5})
     assert again["start_step"] == 4 and np.isfinite(again["final"]["loss"])
     stored = json.loads((work / "config.json").read_text())["config"]
     assert stored["train"]["learning_rate"] == 2e-3 and stored["inference"]["temperature"] == 0.5
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
     assert [r["step"] for r in lines][-1] == 8
     with pytest.raises(CheckpointError, match="does not match"):
-        train(data, work, preset="tiny", steps=8, progress=False, overrides={"gru_hidden": 16})
+        train(data, work, preset="tiny", steps=8, progress=False, overrides={"model.gru_hidden": 16})
 
 
 def test_training_again_in_one_process_reuses_the_compiled_step(trained, tmp_path, monkeypatch):
@@ -77,7 +78,7 @@ def test_training_again_in_one_process_reuses_the_compiled_step(trained, tmp_pat
     module level, the config static, the state without optimiser object): over two trainings into fresh
     workdirs the step is traced at most once (none when the session's training already traced it), i.e. the
     second training traces nothing."""
-    from jaxgest.zeggs import train as ztrain
+    from jaxgest.zeggs import trainer as ztrain
 
     traces = []
     real = ztrain.make_train_step  # called only while jit traces the step
@@ -335,7 +336,8 @@ def test_cli_generate_pca_and_errors(trained, tmp_path, copy_workdir, run_cli):
     assert r.returncode == 2 and "no ZeroEGGS model" in r.stderr
     r = run_cli(["zeggs", "train", "--data", str(data), "--workdir", str(tmp_path / "w"),
                  "--override", "gru=3"])
-    assert r.returncode == 2 and "--override" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert r.returncode == 2 and "unknown ZeroEGGS config field 'gru'" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "w").exists()  # checked before any data is written
 
 
 def test_train_cli_on_a_finished_workdir_says_nothing_to_do(trained, capsys, copy_workdir):
@@ -399,39 +401,34 @@ def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, cli
     styles, audio = clips
     assert np.all(np.isfinite(model.generate(audio, styles[:1]).rotations))
     # its checkpoints are compared field by field: resuming with today's defaults names what differs
-    from jaxgest.zeggs.train import train
+    from jaxgest.zeggs.trainer import train
 
     differs = r"does not match the requested model \(.*input_norm: 'channel' -> 'group'"
     with pytest.raises(CheckpointError, match=differs):
         train(trained[0], old, preset="tiny", steps=8, progress=False)
 
 
-def test_model_cache_is_keyed_on_the_checkpoint_step(trained, tmp_path):
-    """api.ModelCache reuses a loaded model while the newest checkpoint is the same and loads again when a
-    newer step appears; load_model itself never caches."""
-    import shutil
+def test_a_loaded_model_owns_its_compiled_functions(trained):
+    """load() reads the workdir on every call; each model keeps its own jitted functions (no module-level
+    cache); generate takes a path or (samples, rate) for the audio and a path or Motion for the style."""
+    from jaxgest.audio import load_audio
+    from jaxgest.zeggs.api import load
 
-    from jaxgest.zeggs.api import ModelCache
-    from jaxgest.zeggs.inference import load_model
-
-    _, work, _ = trained
-    copy = tmp_path / "work"
-    shutil.copytree(work, copy)
-    cache = ModelCache(maxsize=1)
-    first = cache.get(copy)
-    assert cache.get(copy) is first and load_model(copy) is not load_model(copy)
-    steps = sorted(int(p.name) for p in (copy / "checkpoints/zeggs").iterdir() if p.name.isdigit())
-    newer = steps[-1] + 10
-    shutil.copytree(copy / f"checkpoints/zeggs/{steps[-1]}", copy / f"checkpoints/zeggs/{newer}")
-    second = cache.get(copy)
-    assert second is not first and second.step == newer and first.step == steps[-1]
-    assert cache.get(copy) is second
+    data, work, _ = trained
+    model, other = load(work), load(work)
+    assert model is not other and model.fns is not other.fns
+    assert model.fns["generate"] is not other.fns["generate"]
+    audio = sorted(data.glob("*.wav"))[0]
+    style = sorted(data.glob("*.bvh"))[0]
+    a = model.generate(audio, style, seed=1)
+    b = model.generate(load_audio(audio), [bvh.load(style)], seed=1)
+    np.testing.assert_array_equal(a.rotations, b.rotations)
 
 
 def test_train_cli_no_loudness_flag_reaches_the_config(monkeypatch):
     from jaxgest.cli import main
     from jaxgest.motion.synthetic import dataset as synthetic_dataset
-    from jaxgest.zeggs import train as ztrain
+    from jaxgest.zeggs import trainer as ztrain
 
     seen = {}
 
@@ -442,6 +439,6 @@ def test_train_cli_no_loudness_flag_reaches_the_config(monkeypatch):
     monkeypatch.setattr(ztrain, "train", fake_train)
     monkeypatch.setattr(synthetic_dataset, "training_folder", lambda data, workdir, progress=True: data)
     assert main(["zeggs", "train", "--workdir", "w", "--no-loudness"]) == 0
-    assert seen["overrides"] == {"loudness": False}
+    assert seen["overrides"] == {"model.loudness": False}
     assert main(["zeggs", "train", "--workdir", "w"]) == 0
     assert seen["overrides"] == {}

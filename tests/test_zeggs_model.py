@@ -323,7 +323,8 @@ def test_optimizer_is_radam_with_staircase_decay():
 
 
 def test_compile_options_tiny_only_and_cli_overrides():
-    from jaxgest.commands.zeggs import parse_overrides
+    from jaxgest.runtime.config import apply_overrides, parse_overrides
+    from jaxgest.zeggs.trainer import DATA_FIELDS
 
     paper = preset("paper")
     assert paper.train.xla_opt_level is None and paper.train.compiler_options is None  # XLA defaults
@@ -332,13 +333,19 @@ def test_compile_options_tiny_only_and_cli_overrides():
     old = {k: v for k, v in {**paper.model.to_dict(), **paper.train.to_dict()}.items()
            if k not in ("xla_opt_level", "steps")}  # a flat config.json from before the field
     assert Config.from_dict(old) == paper
-    o = parse_overrides(["xla_opt_level=none", "gru_hidden=128", "speech_channels=32,32", "mirror=false",
-                         "learning_rate=3e-4", "temperature=0.5"])
-    assert o == {"xla_opt_level": None, "gru_hidden": 128, "speech_channels": (32, 32), "mirror": False,
-                 "learning_rate": 3e-4, "temperature": 0.5}
-    for bad in ("gru=3", "num_joints=4", "gru_hidden=big", "mirror=maybe", "gru_hidden"):
-        with pytest.raises(JaxgestError, match="--override"):
-            parse_overrides([bad])
+    o = parse_overrides(["train.xla_opt_level=none", "model.gru_hidden=128", "model.speech_channels=32,32",
+                         "train.mirror=false", "train.learning_rate=3e-4", "inference.temperature=0.5"])
+    cfg = apply_overrides(TINY, o, model="ZeroEGGS", forbidden=DATA_FIELDS)
+    assert cfg.train.xla_opt_level is None and cfg.inference.xla_opt_level == 0  # only the part named
+    assert cfg.model.gru_hidden == 128 and cfg.model.speech_channels == (32, 32) and not cfg.train.mirror
+    assert cfg.train.learning_rate == 3e-4 and cfg.inference.temperature == 0.5
+    for bad, msg in (("gru=3", "unknown ZeroEGGS config field 'gru'"), ("model.num_joints=4", "set from the data"),
+                     ("model.gru_hidden=big", "expected a int"), ("train.mirror=maybe", "expected a bool"),
+                     ("gru_hidden=3", "closest: model.gru_hidden")):
+        with pytest.raises(JaxgestError, match=msg):
+            apply_overrides(TINY, parse_overrides([bad]), model="ZeroEGGS", forbidden=DATA_FIELDS)
+    with pytest.raises(JaxgestError, match="expected KEY=VALUE"):
+        parse_overrides(["model.gru_hidden"])
 
 
 def test_to_world_equals_quaternion_rotation(key):

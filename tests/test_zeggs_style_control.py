@@ -41,7 +41,7 @@ def build_styled(root, steps: int = STEPS):
     from jaxgest.motion.synthetic import render_clip
     from jaxgest.motion.synthetic.content import CONTENTS as SPECS
     from jaxgest.zeggs.inference import load_model
-    from jaxgest.zeggs.train import train
+    from jaxgest.zeggs.trainer import train
 
     root = pathlib.Path(root)
     data = root / "data"
@@ -64,7 +64,7 @@ def build_styled(root, steps: int = STEPS):
     # experiments/zeggs_synthetic/README.md discusses the weak style contrasts); these tests check that the
     # generator follows the embedding, blends and PCA edits in the right direction, on a model where it does.
     train(data, work, preset="tiny", steps=steps, progress=False, log_every=steps,
-          overrides={"style_sampling": "overlap"})
+          overrides={"train.style_sampling": "overlap"})
     model = load_model(work)
     audio = data / f"{CONTENTS[0]}_{STYLES[0]}_0.wav"
     examples = [clips[CONTENTS[1], s] for s in STYLES]  # style examples of the other content

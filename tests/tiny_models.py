@@ -12,7 +12,7 @@ CKPT_EVERY = 2
 
 def train_tgst(data, workdir, seed=TINY_SEED, **kw):
     """TGST tiny preset as the shared workdir is trained (keywords override)."""
-    from jaxgest.tgst.train import train
+    from jaxgest.tgst.trainer import train
 
     args = dict(preset="tiny", seed=seed, progress=False, log_every=1, ckpt_every=CKPT_EVERY, **TGST_STEPS)
     return train(data, workdir, **{**args, **kw})
@@ -20,7 +20,7 @@ def train_tgst(data, workdir, seed=TINY_SEED, **kw):
 
 def train_zeggs(data, workdir, seed=TINY_SEED, **kw):
     """ZeroEGGS tiny preset as the shared workdir is trained (keywords override)."""
-    from jaxgest.zeggs.train import train
+    from jaxgest.zeggs.trainer import train
 
     args = dict(preset="tiny", seed=seed, progress=False, log_every=1, ckpt_every=CKPT_EVERY, steps=ZEGGS_STEPS)
     return train(data, workdir, **{**args, **kw})

@@ -51,7 +51,7 @@ def load_params(workdir, ae_step=None, transformer=True):
     """(cfg, params) of a workdir; the transformer is optional (an autoencoder-only workdir)."""
     import pathlib
 
-    from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
+    from jaxgest.tgst.trainer import ae_checkpointer, transformer_checkpointer
 
     stored = json.loads((pathlib.Path(workdir) / "config.json").read_text())
     cfg = Config.from_dict(stored["config"]).model

@@ -48,7 +48,7 @@ import numpy as np
 
 from jaxgest.bench.machine import floor
 
-# The SPEC §8 record (key -> allowed JSON types), and the extra fields this harness adds.
+# The docs/design.md §8 record (key -> allowed JSON types), and the extra fields this harness adds.
 RECORD_FIELDS: dict[str, tuple] = {
     "case": (str,),
     "impl": (str,),
@@ -422,7 +422,7 @@ def _check_fields(obj: dict, fields: dict, required: bool, what: str) -> None:
 
 
 def validate_record(rec: dict) -> None:
-    """Raise ValueError when a record does not follow the SPEC §8 schema (plus the extra fields)."""
+    """Raise ValueError when a record does not follow the docs/design.md §8 schema (plus the extra fields)."""
     what = f"record {rec.get('case')}/{rec.get('impl')}"
     _check_fields(rec, RECORD_FIELDS, True, what)
     _check_fields(rec, EXTRA_FIELDS, False, what)

@@ -1,6 +1,6 @@
 """NumPy reference of the TGST transfer forward pass (paper variant), on the same Flax parameter tree.
 
-Written from the paper and SPEC §3, independently of the Flax modules' code paths: plain im2col
+Written from the paper and docs/design.md §3, independently of the Flax modules' code paths: plain im2col
 convolutions, a dense band-masked attention, explicit LayerNorm and exact (erf) GELU. It is the third
 implementation of the benchmark's transfer case and a test oracle (``tests/test_bench_harness.py`` checks
 it against ``jaxgest.tgst.model.transfer_arrays``).
@@ -132,7 +132,7 @@ def decoder(p: dict, enc_c: np.ndarray, enc_s: np.ndarray) -> np.ndarray:
 
 
 def pad_clip(x: np.ndarray, edge: int) -> np.ndarray:
-    """Clip ends (SPEC §3): ``edge`` copies of the first frame before the clip, copies of the last frame after
+    """Clip ends (docs/design.md §3): ``edge`` copies of the first frame before the clip, copies of the last frame after
     it (at least ``edge``) up to a multiple of 16 frames in total."""
     f = x.shape[1]
     total = -(-(f + 2 * edge) // 16) * 16

@@ -6,6 +6,8 @@ import argparse
 import pathlib
 from typing import Optional
 
+from jaxgest.runtime.config import parse_overrides
+
 LOG_EVERY = 50  # default --log-every of every train command
 
 
@@ -13,11 +15,15 @@ def add_train_arguments(parser: argparse.ArgumentParser, *, presets, data_help: 
                         steps_help: str, ckpt_every: Optional[int] = 500,
                         ckpt_help: str = "checkpoint every N steps (and at the end)") -> None:
     """The arguments every ``<model> train`` command shares, with one set of defaults: ``--data``,
-    ``--workdir``, ``--preset``, ``--steps``, ``--seed``, ``--devices``, ``--ckpt-every``, ``--log-every``.
-    Pass the parsed namespace to :func:`training_data` for the data folder."""
+    ``--workdir``, ``--preset``, ``--override``, ``--steps``, ``--seed``, ``--devices``, ``--ckpt-every``,
+    ``--log-every``. Pass the parsed namespace to :func:`training_data` for the data folder and to
+    :func:`overrides` for the config overrides."""
     parser.add_argument("--data", default=None, help=data_help)
     parser.add_argument("--workdir", required=True, help=workdir_help)
     parser.add_argument("--preset", default="tiny", choices=tuple(presets))
+    parser.add_argument("--override", action="append", default=[], metavar="KEY=VALUE",
+                        help="set a config field of the preset by its dotted path, e.g. "
+                             "train.learning_rate=3e-4 (VALUE as JSON or a Python literal; repeatable)")
     parser.add_argument("--steps", type=int, default=None, help=steps_help)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
@@ -36,3 +42,8 @@ def training_data(args: argparse.Namespace) -> pathlib.Path:
     check_steps(**{k: getattr(args, k) for k in ("steps", "ae_steps", "transformer_steps") if hasattr(args, k)})
     check_intervals(log_every=args.log_every, ckpt_every=args.ckpt_every)
     return training_folder(args.data, args.workdir, progress=True)
+
+
+def overrides(args: argparse.Namespace) -> dict:
+    """``--override KEY=VALUE ...`` as ``{key: value}`` (:func:`jaxgest.runtime.config.parse_overrides`)."""
+    return parse_overrides(args.override)

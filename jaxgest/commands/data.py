@@ -1,4 +1,4 @@
-"""``jaxgest synth`` and ``jaxgest render`` (SPEC §6): built-in data and stick-figure animations."""
+"""``jaxgest synth`` and ``jaxgest render`` (docs/design.md §6): built-in data and stick-figure animations."""
 
 from __future__ import annotations
 

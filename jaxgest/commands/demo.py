@@ -1,4 +1,4 @@
-"""``jaxgest demo`` (the main job) and ``jaxgest pipeline`` (speech -> gestures -> style), SPEC §6.
+"""``jaxgest demo`` (the main job) and ``jaxgest pipeline`` (speech -> gestures -> style), docs/design.md §6.
 
 The demo runs everything on the built-in synthetic data, with no download and no GPU:
 
@@ -119,11 +119,11 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     from jaxgest.render import render_gif
     from jaxgest.tgst import evaluate as tev
     from jaxgest.tgst.api import load_model as load_tgst
-    from jaxgest.tgst.train import train as train_tgst
+    from jaxgest.tgst.trainer import train as train_tgst
     from jaxgest.runtime.training import write_json_atomic
     from jaxgest.zeggs import evaluate as zev
     from jaxgest.zeggs.inference import load_model as load_zeggs
-    from jaxgest.zeggs.train import train as train_zeggs
+    from jaxgest.zeggs.trainer import train as train_zeggs
 
     plan = PLANS["quick" if quick else "full"]
     out = pathlib.Path(out)

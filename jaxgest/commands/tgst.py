@@ -1,10 +1,10 @@
-"""``jaxgest tgst train | transfer | evaluate`` (SPEC §6)."""
+"""``jaxgest tgst train | transfer | evaluate`` (docs/design.md §6)."""
 
 from __future__ import annotations
 
 import pathlib
 
-from jaxgest.commands.common import add_train_arguments, training_data
+from jaxgest.commands.common import add_train_arguments, overrides, training_data
 from jaxgest.runtime.errors import DataError
 from jaxgest.tgst.config import PRESETS, InferenceConfig
 from jaxgest.tgst.model import METHODS
@@ -20,7 +20,8 @@ def register(subparsers) -> None:
         t, presets=PRESETS, workdir_help="run folder (config.json, checkpoints, metrics.jsonl)",
         data_help="folder: Bandai-Namco files, ZEGGS layout or manifest.csv (default: the built-in synthetic "
         "data, written to W/synthetic-data)",
-        steps_help="steps of EACH stage (default: tiny 200, paper 10000); see also --ae-steps")
+        steps_help="steps of EACH stage (default: the preset's train.autoencoder.steps and "
+        "train.transformer.steps); see also --ae-steps")
     t.add_argument("--ae-steps", type=int, default=None, help="autoencoder steps (overrides --steps)")
     t.add_argument("--transformer-steps", type=int, default=None, help="transformer steps (overrides --steps)")
     t.add_argument("--ablate", default=None, metavar="TERM[,TERM]",
@@ -40,14 +41,16 @@ def register(subparsers) -> None:
 
 
 def _train(args) -> int:
-    from jaxgest.tgst.train import format_summary, train
+    from jaxgest.tgst.trainer import apply_overrides, format_summary, resolve_preset, train
 
     ae = args.ae_steps if args.ae_steps is not None else args.steps
     tr = args.transformer_steps if args.transformer_steps is not None else args.steps
     ablate = tuple(a.strip() for a in args.ablate.split(",") if a.strip()) if args.ablate else ()
+    changes = overrides(args)
+    apply_overrides(resolve_preset(args.preset), changes)  # a bad override writes nothing
     summary = train(training_data(args), args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr,
                     seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-                    ablate=ablate)
+                    ablate=ablate, overrides=changes)
     print(format_summary(summary))
     return 0
 
@@ -128,7 +131,7 @@ def _evaluate(args) -> int:
 
 
 def register_evaluate(tgst_subparsers) -> None:
-    """Add ``evaluate`` to the ``jaxgest tgst`` subcommands (SPEC §6): paper Tables 2-3 (and 1)."""
+    """Add ``evaluate`` to the ``jaxgest tgst`` subcommands (docs/design.md §6): paper Tables 2-3 (and 1)."""
     from jaxgest.tgst.evaluate import DEFAULT_BUCKET, PAIR_MODES, PROTOCOLS, TRANSFER_METHODS
 
     p = tgst_subparsers.add_parser(

@@ -1,12 +1,13 @@
-"""``jaxgest zeggs train | generate | pca | evaluate`` (SPEC §6)."""
+"""``jaxgest zeggs train | generate | pca | evaluate`` (docs/design.md §6)."""
 
 from __future__ import annotations
 
 import json
 import pathlib
 
-from jaxgest.commands.common import add_train_arguments, training_data
+from jaxgest.commands.common import add_train_arguments, overrides, training_data
 from jaxgest.runtime.errors import JaxgestError
+from jaxgest.zeggs.config import PRESETS
 
 
 def register(subparsers) -> None:
@@ -16,14 +17,12 @@ def register(subparsers) -> None:
 
     t = sub.add_parser("train", help="train (or resume) on a folder of BVH + WAV clips")
     add_train_arguments(
-        t, presets=("tiny", "small", "paper"), workdir_help="run folder (checkpoints, stats, metrics.jsonl)",
+        t, presets=PRESETS, workdir_help="run folder (checkpoints, stats, metrics.jsonl)",
         data_help="folder: ZEGGS layout or manifest.csv with audio (default: the built-in synthetic data, "
         "written to W/synthetic-data)",
         steps_help="total training steps (default: the preset's, tiny 300, small 8000, paper 120000)",
         ckpt_every=None, ckpt_help="checkpoint every N steps and at the end (default: a tenth of the steps, "
         "at least 50)")
-    t.add_argument("--override", action="append", default=[], metavar="FIELD=VALUE",
-                   help="replace a config field of the preset, e.g. gru_hidden=128 or speech_channels=32,32")
     t.add_argument("--no-loudness", action="store_true",
                    help="use the speech as recorded (default: loudness-normalised to -20 LUFS, as the authors)")
     t.set_defaults(func=_train)
@@ -69,13 +68,16 @@ def register(subparsers) -> None:
 
 
 def _train(args) -> int:
-    from jaxgest.zeggs.train import train
+    from jaxgest.runtime.config import apply_overrides
+    from jaxgest.zeggs.config import preset
+    from jaxgest.zeggs.trainer import DATA_FIELDS, train
 
-    overrides = {**parse_overrides(args.override), **({"loudness": False} if args.no_loudness else {})}
+    changes = {**overrides(args), **({"model.loudness": False} if args.no_loudness else {})}
+    apply_overrides(preset(args.preset), changes, model="ZeroEGGS", forbidden=DATA_FIELDS)  # a bad one writes nothing
     data = training_data(args)  # steps and intervals checked before any data is written
     r = train(data, args.workdir, preset=args.preset, steps=args.steps,
               seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-              overrides=overrides)
+              overrides=changes)
     final = r["final"]
     if r["start_step"] >= r["steps"]:
         if r["start_step"] == 0:
@@ -87,39 +89,6 @@ def _train(args) -> int:
     print(f"zeggs: trained {r['steps']} steps (resumed from {r['start_step']}) on {r['devices']} device(s) in "
           f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}; workdir {args.workdir}")
     return 0
-
-
-def parse_overrides(items) -> dict:
-    """``["gru_hidden=128", "speech_channels=32,32", "mirror=false"]`` -> typed config overrides (bare field
-    names of any part of :class:`jaxgest.zeggs.config.Config`)."""
-    from jaxgest.zeggs.config import Config
-
-    defaults = Config()
-    fields = {name: getattr(part, name) for part in (defaults.model, defaults.train, defaults.inference)
-              for name in part.to_dict()}
-    out = {}
-    for item in items:
-        name, sep, text = item.partition("=")
-        name = name.strip()
-        if not sep or name not in fields or name == "num_joints":
-            raise JaxgestError(f"--override {item!r}: expected FIELD=VALUE with FIELD a ZeroEGGS config field "
-                               "(see jaxgest/zeggs/config.py; num_joints comes from the data)")
-        default = fields[name]
-        try:
-            if default is None:  # optional int (xla_opt_level)
-                value = None if text.lower() == "none" else int(text)
-            elif isinstance(default, bool):
-                if text.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError
-                value = text.lower() in ("true", "1")
-            elif isinstance(default, tuple):
-                value = tuple(int(x) for x in text.split(",") if x.strip())
-            else:
-                value = type(default)(text)
-        except ValueError:
-            raise JaxgestError(f"--override {item!r}: {text!r} is not a valid {type(default).__name__}") from None
-        out[name] = value
-    return out
 
 
 def _parse_weights(text):

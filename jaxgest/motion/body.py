@@ -1,4 +1,4 @@
-"""The papers' 21-joint body and the joint maps that bring any skeleton to it (SPEC §2).
+"""The papers' 21-joint body and the joint maps that bring any skeleton to it (docs/design.md §2).
 
 Kuriyama et al. 2022 (§3.1) represent a pose by the exponential maps of 21 joints: 13 upper-body joints
 (39 channels: the autoencoder's input) and 8 lower-body joints (24 channels: the lower decoder's output).

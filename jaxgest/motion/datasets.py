@@ -1,6 +1,6 @@
 """Folder datasets (Bandai-Namco, ZEGGS, manifest.csv), random windows, normalisation stats, resampling.
 
-Layouts recognised by :func:`load_folder` (SPEC §6):
+Layouts recognised by :func:`load_folder` (docs/design.md §6):
 
 * ``manifest.csv`` with columns ``path, content, style[, audio]`` (paths relative to the folder) -- the
   built-in synthetic data (:mod:`jaxgest.motion.synthetic`) is written this way;

@@ -1,4 +1,4 @@
-"""The root joint: root-yaw removal/restoration, root position, floor contact (SPEC §2).
+"""The root joint: root-yaw removal/restoration, root position, floor contact (docs/design.md §2).
 
 Motion-level functions in NumPy float64 on top of :mod:`jaxgest.motion.kinematics` (which re-exports them).
 References: Kuriyama et al. 2022, §3.1 (root orientation and floor contact).

@@ -1,4 +1,4 @@
-"""Rotation conversions: quaternions, exponential maps, matrices, 6-D, Euler angles (SPEC §7).
+"""Rotation conversions: quaternions, exponential maps, matrices, 6-D, Euler angles (docs/design.md §7).
 
 Conventions
 -----------

@@ -17,7 +17,7 @@ noise (:func:`jaxgest.runtime.orbax_noise.quiet_absl`), and the filter of asynci
 
 The one-line reasons and the content digest are in :mod:`jaxgest.runtime.checkpoint_faults`.
 
-References: STYLE.md (flax examples' orbax usage).
+References: flax examples' orbax usage.
 """
 
 from __future__ import annotations

@@ -52,7 +52,7 @@ The mesh then holds every device of every host (``--devices`` must be omitted or
 count), ordered by process so host ``p`` owns the ``p``-th contiguous block of the global batch.
 Checkpoints are written by orbax from all hosts into a shared ``--workdir``.
 
-References: JAX "Distributed arrays and automatic parallelization" and "Multi-process" guides; STYLE.md.
+References: JAX "Distributed arrays and automatic parallelization" and "Multi-process" guides.
 """
 
 from __future__ import annotations

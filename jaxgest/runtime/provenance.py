@@ -48,7 +48,7 @@ def commit_of(path=None) -> tuple[str | None, bool | None]:
 def stamp(config: dict, command: str | list | None = None, repo=None) -> dict:
     """The stamp of a result: commit (and whether the tree had uncommitted changes), package version,
     the resolved config (as given: a JSON-able dict) and the command (default: this process's argv)."""
-    from jaxgest import __version__
+    from jaxgest._version import __version__
     import jax
 
     if command is None:

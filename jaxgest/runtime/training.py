@@ -14,7 +14,7 @@ Every model (TGST autoencoder, TGST transformer, ZEGGS) trains through :func:`tr
   ``tgst autoencoder: non-finite loss at step 120; stopped, the last good checkpoint (step 100) is kept
   (lower the learning rate or check the data for NaN)``.
 
-References: STYLE.md (big_vision train loop, flax examples' orbax usage).
+References: big_vision train loop; flax examples' orbax usage.
 """
 
 from __future__ import annotations

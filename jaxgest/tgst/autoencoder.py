@@ -285,7 +285,7 @@ def expmap_reconstruction_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
     """Mean over frames and joints of the per-joint exp-map difference norm ``||r_hat - r||_2``.
 
     pred, target: ``(batch, frames, 3J)``. Returns ``(batch,)``. The paper (§3.5) speaks of "the mean
-    square of ... angular differences"; SPEC.md §3 follows the authors' code, which averages the plain
+    square of ... angular differences"; docs/design.md §3 follows the authors' code, which averages the plain
     (unsquared) L2 norm of exp-map differences, as done here.
     References: Kuriyama et al. 2022, §3.5 (authors' code ``AutoEncoder.loss_function``).
     """

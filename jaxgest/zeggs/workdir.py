@@ -1,6 +1,6 @@
 """A ZeroEGGS workdir: file names, ``config.json``, checkpoint meta and loading a trained model.
 
-Imported by both training (:mod:`jaxgest.zeggs.train`) and inference (:mod:`jaxgest.zeggs.inference`,
+Imported by both training (:mod:`jaxgest.zeggs.trainer`) and inference (:mod:`jaxgest.zeggs.inference`,
 :mod:`jaxgest.zeggs.evaluate`), so inference never imports the training module.
 
 The workdir holds ``config.json`` (``"model": "zeggs"``, the preset name, the three-part config

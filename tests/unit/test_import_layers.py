@@ -14,7 +14,10 @@ import pytest
 PACKAGE = pathlib.Path(__file__).resolve().parents[2] / "jaxgest"
 
 # (importer prefix, forbidden import prefixes)
+TOP = ("jaxgest.tgst", "jaxgest.zeggs", "jaxgest.cli", "jaxgest.commands", "jaxgest.pipeline", "jaxgest.bench")
 LAYERS = [
+    ("jaxgest.runtime", TOP + ("jaxgest.motion", "jaxgest.metrics", "jaxgest.kernels")),
+    ("jaxgest.motion", TOP + ("jaxgest.metrics",)),
     ("jaxgest.motion", ("jaxgest.tgst", "jaxgest.zeggs", "jaxgest.cli", "jaxgest.commands", "jaxgest.pipeline")),
     ("jaxgest.metrics", ("jaxgest.tgst", "jaxgest.zeggs", "jaxgest.cli", "jaxgest.commands", "jaxgest.pipeline")),
     ("jaxgest.runtime", ("jaxgest.tgst", "jaxgest.zeggs", "jaxgest.cli", "jaxgest.commands", "jaxgest.pipeline")),

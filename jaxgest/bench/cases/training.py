@@ -69,7 +69,7 @@ def tgst_transformer_case() -> Case:
     b, f = cfg.train.transformer.batch_size, cfg.train.transformer.window
 
     def step(state, batch, key, ae_params):
-        # ae_params as an argument (as jaxgest.tgst.train does): a closed-over pytree would be baked into
+        # ae_params as an argument (as jaxgest.tgst.trainer does): a closed-over pytree would be baked into
         # the executable as constants and inflate the compile time.
         return TS.make_transformer_train_step(cfg, tx, ae_params)(state, batch, key)
 

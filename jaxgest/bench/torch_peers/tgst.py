@@ -6,7 +6,7 @@ attention and after both residuals -- post-LN --, fused ``fc_qkv``, the dense 25
 ``masked_fill(-1e10)``), ``TransformerDecoder`` (shared LayerNorm, ``fc_q`` and fused ``fc_kv``) and the
 multi-stream soft ``swapper``, in the authors' ``(tokens, batch, dim)`` layout with their
 ``tensor2token``. The glue follows jaxgest so the outputs are comparable: both clips are replicate-padded
-by ``edge_frames`` at both ends (SPEC §3), the style latents are cut to the real clip, and the tokens are
+by ``edge_frames`` at both ends (docs/design.md §3), the style latents are cut to the real clip, and the tokens are
 merged back with jaxgest's per-frame linear cross-fade (:func:`jaxgest.tgst.tokens.detokenize`; the
 authors' ``linear_blending`` ramps over the 32 flattened values of a half token instead). The JAX side of
 the comparison runs ``transformer.variant="authors"`` (the same network).

@@ -1,4 +1,4 @@
-"""Built-in synthetic gesture data with known styles (SPEC §9).
+"""Built-in synthetic gesture data with known styles (docs/design.md §9).
 
 Seeded procedural gestures on the 21-joint body at 60 fps, paired with speech-like audio:
 

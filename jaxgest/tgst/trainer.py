@@ -12,14 +12,12 @@ retrained. The transformer's checkpoint records the autoencoder step it was trai
 has trained further, that transformer is moved aside (:func:`jaxgest.tgst.workdir.set_aside_stale_transformer`)
 and retrained.
 
-Default step counts (``DEFAULT_STEPS``): tiny 200 + 200; fit 6,000 + 10,000; paper 10,000 + 10,000 (about the paper's 1000
-epochs of its 21 min of AE data in batches of 32 x 256 frames, and of its 63 content/style pairs in batches
-of 8). References: Kuriyama et al. 2022, §3.5, §4.1.
+Step counts live in the preset (``train.autoencoder.steps``, ``train.transformer.steps``; the arguments
+``ae_steps`` / ``transformer_steps`` replace them). References: Kuriyama et al. 2022, §3.5, §4.1.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import pathlib
 import time
 from typing import Optional
@@ -30,6 +28,7 @@ import optax
 
 from jaxgest.runtime import parallel, training
 from jaxgest.runtime.training import bare_state, jit_config_step
+from jaxgest.runtime.config import apply_overrides as override_config
 from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.tgst import autoencoder
 from jaxgest.tgst import data as tdata
@@ -42,14 +41,8 @@ from jaxgest.tgst.workdir import (AE_KIND, AE_SUBDIR, MODEL, TRANSFORMER_KIND,  
                                   set_aside_stale_transformer, stored_transformer_meta,
                                   transformer_checkpointer)
 
-DEFAULT_STEPS = {"tiny": (200, 200), "paper": (10_000, 10_000), "fit": (6_000, 10_000),
-                 "fit-pca": (6_000, 10_000), "fit-smooth": (1_000, 10_000), "fit-motion": (500, 10_000)}
-PRESETS = tuple(DEFAULT_STEPS)
-
-
 def resolve_preset(preset: str) -> Config:
-    if preset not in PRESETS:
-        raise JaxgestError(f"unknown TGST preset {preset!r} (choose from {', '.join(PRESETS)})")
+    """The preset ``preset`` (:data:`jaxgest.tgst.config.PRESETS`); an unknown name is one line."""
     return get_preset(preset)
 
 
@@ -69,50 +62,11 @@ def apply_ablation(cfg: Config, ablate=()) -> Config:
     return apply_overrides(cfg, {f"train.transformer.use_{a}": False for a in ablate})
 
 
-def _override_path(key: str) -> tuple[str, ...]:
-    """A dotted override key as a path into :class:`Config`; the flat names of the versions before the split
-    (``swap_similarity``, ``transformer.token_positions``, ``ae_window``, ``use_cyclic``) still work."""
-    from jaxgest.tgst.config import _LEGACY_TRAIN, ModelConfig
-
-    parts = tuple(key.split("."))
-    if parts[0] in {f.name for f in dataclasses.fields(Config)}:
-        return parts
-    if parts[0] in {f.name for f in dataclasses.fields(ModelConfig)}:
-        return ("model",) + parts
-    if len(parts) == 1 and parts[0] in _LEGACY_TRAIN:
-        return ("train",) + _LEGACY_TRAIN[parts[0]]
-    return parts
-
-
-def _set_path(d: dict, path: tuple[str, ...], value, where: str = "Config") -> None:
-    """Set ``d[path[0]]...[path[-1]] = value`` in a config's dict form; unknown names raise ``TypeError``."""
-    if path[0] not in d:
-        raise TypeError(f"{where} has no field {path[0]!r}")
-    if len(path) == 1:
-        if isinstance(d[path[0]], dict):
-            raise TypeError(f"{where}.{path[0]} is a section; set its fields")
-        d[path[0]] = value
-        return
-    if not isinstance(d[path[0]], dict):
-        raise TypeError(f"{where} has no section {path[0]!r}")
-    _set_path(d[path[0]], path[1:], value, f"{where}.{path[0]}")
-
-
 def apply_overrides(cfg: Config, overrides: Optional[dict] = None) -> Config:
-    """``cfg`` with fields replaced by dotted paths: ``{"model.swap_similarity": "scaled",
-    "model.transformer.token_positions": "none", "train.autoencoder.mirror": False}`` (the flat names of
-    older versions are accepted too, see :func:`_override_path`); for experiments and ablations."""
-    if not overrides:
-        return cfg
-    # all fields set first, then checked once: fields that must agree (the latent width and the token
-    # width, say) can be changed together
-    d = cfg.to_dict()
-    try:
-        for key, value in overrides.items():
-            _set_path(d, _override_path(key), value)
-        return type(cfg).from_dict(d)
-    except (TypeError, ValueError) as e:
-        raise JaxgestError(f"bad TGST config override: {e}") from None
+    """``cfg`` with fields replaced by dotted paths from the top of :class:`~jaxgest.tgst.config.Config`:
+    ``{"model.swap_similarity": "scaled", "train.autoencoder.mirror": False}``
+    (:func:`jaxgest.runtime.config.apply_overrides`)."""
+    return override_config(cfg, overrides, model="TGST")
 
 
 def ae_optimizer(cfg: Config) -> optax.GradientTransformation:
@@ -180,9 +134,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     t0 = time.perf_counter()
     parallel.maybe_initialize_distributed()
     cfg0 = apply_ablation(apply_overrides(resolve_preset(preset), overrides), ablate)
-    d_ae, d_tr = DEFAULT_STEPS[preset]
-    ae_steps = d_ae if ae_steps is None else int(ae_steps)
-    transformer_steps = d_tr if transformer_steps is None else int(transformer_steps)
+    ae_steps = cfg0.train.autoencoder.steps if ae_steps is None else int(ae_steps)
+    transformer_steps = cfg0.train.transformer.steps if transformer_steps is None else int(transformer_steps)
     training.check_steps(ae_steps=ae_steps, transformer_steps=transformer_steps)
     training.check_intervals(log_every=log_every, ckpt_every=ckpt_every)
     if data_dir is None:

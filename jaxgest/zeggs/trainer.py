@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgest.runtime import parallel
+from jaxgest.runtime.config import apply_overrides
 from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
@@ -36,11 +37,16 @@ from jaxgest.zeggs.model import init_params
 from jaxgest.zeggs.steps import make_optimizer, make_train_step, pose_stats as stats_arrays
 
 
+#: fields set from the training data's rig, never by an override
+DATA_FIELDS = ("model.num_joints", "model.fk_parents", "model.fk_offsets", "model.fk_translated")
+
+
 def config_for(preset: str, skeleton, overrides: Optional[dict] = None) -> Config:
-    """The preset on ``skeleton``'s rig (joint count, FK fields), with ``overrides`` (bare field names)."""
+    """The preset on ``skeleton``'s rig (joint count, FK fields), with dotted ``overrides``
+    (``{"model.gru_hidden": 128}``, :func:`jaxgest.runtime.config.apply_overrides`)."""
+    cfg = apply_overrides(get_preset(preset), overrides, model="ZeroEGGS", forbidden=DATA_FIELDS)
     try:
-        return get_preset(preset, num_joints=skeleton.num_joints,
-                          **{**features.fk_fields(skeleton), **(overrides or {})})
+        return cfg.override(num_joints=skeleton.num_joints, **features.fk_fields(skeleton))
     except ValueError as e:
         raise DataError(str(e)) from None
 
@@ -58,7 +64,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
           ckpt_every: Optional[int] = None, overrides: Optional[dict] = None) -> dict:
     """Train (or resume) ZeroEGGS on ``data_dir``; returns a summary dict (final metrics, wall time, steps/s).
 
-    ``steps``: total steps (default: the preset's ``train.steps``); ``overrides``: config fields by bare name.
+    ``steps``: total steps (default: the preset's ``train.steps``); ``overrides``: dotted config fields
+    (``{"model.gru_hidden": 128, "train.learning_rate": 3e-4}``).
     """
     parallel.maybe_initialize_distributed()
     check_steps(steps=steps)

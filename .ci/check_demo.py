@@ -1,5 +1,5 @@
 """CI check of `jaxgest demo` outputs: every GIF has more than one frame, every BVH loads in an independent
-parser (tests/bvh_testing.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK, and
+parser (tests/helpers/bvh_testing.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK, and
 metrics.json holds finite numbers."""
 
 import json
@@ -10,7 +10,7 @@ import sys
 import numpy as np
 from PIL import Image
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests" / "helpers"))
 from bvh_testing import reference_fk  # noqa: E402
 
 from jaxgest.motion import bvh, kinematics  # noqa: E402

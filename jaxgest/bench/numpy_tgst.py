@@ -2,7 +2,7 @@
 
 Written from the paper and docs/design.md §3, independently of the Flax modules' code paths: plain im2col
 convolutions, a dense band-masked attention, explicit LayerNorm and exact (erf) GELU. It is the third
-implementation of the benchmark's transfer case and a test oracle (``tests/test_bench_harness.py`` checks
+implementation of the benchmark's transfer case and a test oracle (``tests/integration/test_bench_harness.py`` checks
 it against ``jaxgest.tgst.model.transfer_arrays``).
 
 References: Kuriyama et al. 2022, App. A (autoencoder), eq. 1 (tokens), eqs. 2-4 (transformer, swap),

@@ -37,7 +37,7 @@ range; bias correction calibrated on other inputs): paper preset, random weights
 training data through the inference pipeline (calibrated on the neutral request): int8 0.15-0.24 %, bf16
 0.10-0.15 %. A random ``small`` model (one of two seeds) sits where any persistent weight change moves the
 trajectory: int8 11 %, bf16 1.0 % there. The test bound (``tiny`` preset, 1 %) is in
-``tests/test_zeggs_quant.py``.
+``tests/unit/test_zeggs_quant.py``.
 
 References: Ghorbani et al. 2023, §3.3 (the generator); Jacob et al. 2018 (per-channel weight-only
 quantisation); Nagel et al. 2019 (the output bias of rounding errors in weight quantisation).

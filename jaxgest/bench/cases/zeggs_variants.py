@@ -15,7 +15,7 @@ Each variant is a functional re-implementation of ``ZeggsModel.generate`` on the
   ``max_abs_diff`` in the record is the accuracy cost after ``frames`` autoregressive frames.
 
 Cases ``zeggs_variants_b{1,32}`` (impls ``jit`` = the model, then ``hoist``, ``fused``, ``unroll4``; the
-others are equality-tested in ``tests/test_bench_harness.py`` but not timed by the suite) and
+others are equality-tested in ``tests/integration/test_bench_harness.py`` but not timed by the suite) and
 ``zeggs_variant_bf16_b{1,32}``; not part of ``--quick``. 150 generated frames at batch 1, 60 at batch 32.
 
 Measured (jaxlib 0.10.2, AMD EPYC Zen 5, one XLA thread, process CPU time per frame, machine load ~8):

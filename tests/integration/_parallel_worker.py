@@ -1,8 +1,8 @@
-"""Subprocess worker of tests/test_parallel.py: train registered models data-parallel on N devices.
+"""Subprocess worker of tests/integration/test_parallel.py: train registered models data-parallel on N devices.
 
-tests/test_parallel.py calls ``main(["--devices", N, ...])`` in its own process (4 fake CPU devices, set by
+tests/integration/test_parallel.py calls ``main(["--devices", N, ...])`` in its own process (4 fake CPU devices, set by
 tests/conftest.py) and runs it as a subprocess for the multi-process case:
-``python tests/_parallel_worker.py --devices N --steps K --batch B --seed S --out DIR [--model M ...]`` in a
+``python tests/integration/_parallel_worker.py --devices N --steps K --batch B --seed S --out DIR [--model M ...]`` in a
 process whose ``XLA_FLAGS`` holds ``--xla_force_host_platform_device_count=N`` (set by the parent before this
 interpreter imports jax; ``--host-devices`` sets it here otherwise). For every model it runs
 ``K`` steps of :func:`jaxgest.runtime.training.train_loop` through :mod:`jaxgest.runtime.parallel` and writes
@@ -18,7 +18,7 @@ Registry. ``BUILDERS`` maps a model name to ``builder(seed, batch_size) -> (stat
 ``batch_fn(i)`` the host-global numpy batch pytree of step ``i`` (every leaf ``(batch_size, ...)``), a pure
 function of ``(seed, i)``. Two toys are registered (an MLP and a strided conv net): the mechanism of
 :mod:`jaxgest.runtime.parallel` does not depend on the model. The real models are checked through their ``train``
-entry points instead (tests/test_parallel.py, against the session's 1-device tiny models). Register another
+entry points instead (tests/integration/test_parallel.py, against the session's 1-device tiny models). Register another
 builder with ``@register("name")``; the test picks every registered name up through ``--list``.
 """
 

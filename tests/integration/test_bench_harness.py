@@ -19,7 +19,7 @@ from jaxgest.bench import suite as bench_main
 from jaxgest.bench import harness, machine, report
 from jaxgest.bench.cases import case_modules
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
+REPO = pathlib.Path(__file__).resolve().parents[2]
 CLI_CASE = "zeggs_generate_check_b1"  # a real case with jit / eager / numpy that runs in seconds
 QUIET = dict(log=lambda s: None)
 

@@ -17,7 +17,7 @@ import soundfile as sf
 from jaxgest.motion import bvh
 from jaxgest.motion.kinematics import forward_kinematics
 
-pytestmark = pytest.mark.slow  # the shared model trains 1,200 tiny steps (about a minute on 2 idle cores)
+pytestmark = [pytest.mark.slow, pytest.mark.research]  # the model trains 1,200 tiny steps (about a minute on 2 idle cores)
 
 STYLES = ("energetic", "sad")
 CONTENTS = ("greeting", "apology")

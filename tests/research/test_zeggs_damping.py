@@ -9,7 +9,7 @@ import pathlib
 import numpy as np
 import pytest
 
-EXP = pathlib.Path(__file__).resolve().parents[1] / "experiments" / "zeggs_synthetic"
+EXP = pathlib.Path(__file__).resolve().parents[2] / "experiments" / "zeggs_synthetic"
 
 
 def _module(name: str):

@@ -2,12 +2,12 @@
 
 The test process has 4 fake CPU devices (tests/conftest.py, ``jax_num_cpu_devices``). Two layers are checked:
 
-* the mechanism: the worker of tests/_parallel_worker.py runs IN-PROCESS on 1 device and on 4 devices with
+* the mechanism: the worker of tests/integration/_parallel_worker.py runs IN-PROCESS on 1 device and on 4 devices with
   its two toy models (an MLP and a strided conv net; :mod:`jaxgest.runtime.parallel` knows nothing about the model):
   same parameters and losses, the batch split in blocks over the devices, the state replicated, an all-reduce
   in the compiled step, the device count in metrics.jsonl;
 * the real models: ``tgst.train.train`` and ``zeggs.train.train`` with ``devices=4`` and the session's tiny
-  settings (tests/tiny_models.py) end with the parameters and losses of the session's 1-device models
+  settings (tests/helpers/tiny_models.py) end with the parameters and losses of the session's 1-device models
   (tests/conftest.py), and config.json / metrics.jsonl record the 4 devices.
 
 One true multi-process run remains (marked slow): 2 processes x 2 devices joined by ``jax.distributed``
@@ -62,7 +62,7 @@ def _host_env(host_devices: int, **extra) -> dict:
     # while both are compiling
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
     env.update(XLA_FLAGS=f"--xla_force_host_platform_device_count={host_devices}", JAX_PLATFORMS="cpu",
-               PYTHONPATH=str(WORKER.parents[1]), **extra)
+               PYTHONPATH=str(WORKER.parents[2]), **extra)
     return env
 
 
@@ -314,13 +314,13 @@ def _python_names(path: pathlib.Path) -> list:
 def test_no_pmap_anywhere():
     """Data parallelism is jit + shardings only: no ``pmap`` (nor ``xmap``) in the package, benchmarks or
     tests."""
-    root = WORKER.parents[1]
+    root = WORKER.parents[2]
     files = [p for d in ("jaxgest", "benchmarks", "tests") for p in sorted((root / d).rglob("*.py"))]
     assert len(files) > 20
     used = [f"{p.relative_to(root)}: {n}" for p in files for n in _python_names(p) if n in ("pmap", "xmap")]
     assert not used, used
     # the check itself sees identifiers: parallel.py's step builder is found
-    assert "jit" in _python_names(root / "jaxgest" / "parallel.py")
+    assert "jit" in _python_names(root / "jaxgest" / "runtime" / "parallel.py")
 
 
 # ----- the mesh API ----------------------------------------------------------------------------------------

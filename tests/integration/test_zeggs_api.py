@@ -274,7 +274,7 @@ class _Run:
 @pytest.fixture
 def run_cli(capsys):
     """``run_cli(args) -> _Run``: ``jaxgest.cli.main`` in this process (its compilations are reused; the
-    console script itself is run by tests/test_cli_data.py and the resume tests)."""
+    console script itself is run by tests/integration/test_cli_data.py and the resume tests)."""
     from jaxgest.cli import main
 
     def run(args):

@@ -24,7 +24,7 @@ import optax
 from jaxgest import cli
 from jaxgest.runtime.training import TrainState
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
+REPO = pathlib.Path(__file__).resolve().parents[2]
 NOISE = ("Traceback", "Event loop is closed", "absl", "WARNING:", "ERROR:")
 
 

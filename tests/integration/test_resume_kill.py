@@ -5,7 +5,7 @@ behind the ``jaxgest`` script) on the session's tiny synthetic dataset. A run is
 exists (polling the checkpoint folder: orbax writes ``<step>.orbax-checkpoint-tmp-*`` and renames it to
 ``<step>`` when the save is complete), then restarted; the restored parameters of its final checkpoint
 must equal, bit for bit, those of an uninterrupted run with the same seed -- the session's shared workdir
-(tests/tiny_models.py, trained in-process on one device; the subprocesses pass ``--devices 1`` and the same
+(tests/helpers/tiny_models.py, trained in-process on one device; the subprocesses pass ``--devices 1`` and the same
 settings) -- and the metrics it logs after the restart must equal the uninterrupted run's lines. To make the kill independent of timing, the killed
 run is asked for far more steps than it can reach before the kill; the restart asks for the reference's
 step count (the requested step count is not part of the checkpoint check). The subprocesses share one
@@ -45,7 +45,7 @@ from faults_testing import assert_identical, params_at
 from tiny_models import CKPT_EVERY, TGST_STEPS, TINY_SEED, ZEGGS_STEPS
 
 SEED = TINY_SEED
-REPO = pathlib.Path(__file__).resolve().parents[1]
+REPO = pathlib.Path(__file__).resolve().parents[2]
 TMP_MARK = "orbax-checkpoint-tmp"
 
 

@@ -1,13 +1,13 @@
 """Same seed, same machine -> bit-identical training losses, checkpoints and CLI outputs.
 
 Two trainings of each model with the same seed on the tiny synthetic data (the session's shared workdir and
-a second run trained the same way, tests/tiny_models.py) must write the same
+a second run trained the same way, tests/helpers/tiny_models.py) must write the same
 ``metrics.jsonl`` losses (every field but the wall-clock ``steps_per_s``) and the same checkpointed
 parameters, bit for bit; ``tgst transfer`` and ``zeggs generate`` must write byte-identical BVH files from
 either workdir. A different seed must change them (so the comparison can fail). Batches are pure functions
 of ``(seed, step)``, the PRNG keys are explicit, and XLA on one CPU runs the same program in the same
 order, so nothing here needs a tolerance. (Across machines or device counts only float-tolerance
-agreement is promised: see tests/test_parallel.py.)
+agreement is promised: see tests/integration/test_parallel.py.)
 """
 
 from __future__ import annotations

@@ -85,9 +85,10 @@ def _close(key: str, paths: list[str]) -> str:
     return f" (closest: {', '.join(close)})" if close else ""
 
 
-def _coerce(key: str, value, current):
-    """``value`` as the type of the field's ``current`` value (list -> tuple, int -> float); else an error."""
-    if current is None and value in ("none", "None"):
+def _coerce(key: str, value, current, optional: bool = False):
+    """``value`` as the type of the field's ``current`` value (list -> tuple, int -> float); else an error.
+    ``optional`` (an ``Optional[...]`` field): None, ``"none"`` and ``"None"`` give None."""
+    if (optional or current is None) and value in (None, "none", "None"):
         return None
     if current is None or value is None:
         return value  # optional fields (e.g. xla_opt_level); the dataclass checks the rest
@@ -150,10 +151,11 @@ def apply_overrides(cfg, overrides: Optional[Mapping[str, Any]] = None, *, model
                 raise JaxgestError(f"override {key}: a section; set its fields ({', '.join(section[:3])}, ...)")
             raise JaxgestError(f"unknown {model} config field {key!r}{_close(key, paths)}")
         *parents, leaf = key.split(".")
-        node = values
+        node, owner = values, cfg
         for name in parents:
-            node = node[name]
-        node[leaf] = _coerce(key, value, node[leaf])
+            node, owner = node[name], getattr(owner, name)
+        annotation = str(next(f.type for f in dataclasses.fields(owner) if f.name == leaf))
+        node[leaf] = _coerce(key, value, node[leaf], optional="Optional" in annotation or "None" in annotation)
     try:
         return _rebuild(cfg, values)
     except (TypeError, ValueError) as e:

@@ -42,7 +42,7 @@ def test_config_json_round_trip():
         cfg = preset(name)
         assert Config.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
     assert preset("paper").model.pose_dim == 15 * 75 + 6
-    with pytest.raises(ValueError):
+    with pytest.raises(JaxgestError, match=r"unknown ZeroEGGS preset 'huge' \(choose from paper, tiny, small\)"):
         preset("huge")
     with pytest.raises(ValueError, match="gru"):
         Config.from_dict({**preset("tiny").to_dict(), "model": {"gru": 3}})

@@ -262,11 +262,13 @@ def test_a_workdir_of_the_flat_config_layout_still_transfers(trained, model, tmp
         with Checkpointer(old, kind=kind, config={**flat, **extra}, skeleton=stored["skeleton"], subdir=sub) as ck:
             ck.save(state.replace(step=4))
     loaded = load_model(old)
-    # training fields added after the split take their defaults (what the version that wrote them did);
-    # expmap_branch only shapes training targets, so the transfer below is unaffected
-    tr = model.config.train
+    # training fields added after the split (expmap_branch, the step counts) take their defaults (what the
+    # version that wrote them did); they only shape training, so the transfer below is unaffected
+    tr, defaults = model.config.train, type(model.config.train)()
     assert loaded.cfg == model.cfg and loaded.config.train == dataclasses.replace(
-        tr, autoencoder=dataclasses.replace(tr.autoencoder, expmap_branch="principal"))
+        tr, autoencoder=dataclasses.replace(tr.autoencoder, expmap_branch="principal",
+                                            steps=defaults.autoencoder.steps),
+        transformer=dataclasses.replace(tr.transformer, steps=defaults.transformer.steps))
     content, style = (bvh.load(p) for p in _clips(data)[:2])
     a, b = loaded.transfer(content, style), model.transfer(content, style)
     np.testing.assert_allclose(a.rotations, b.rotations, atol=1e-6)

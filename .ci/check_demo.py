@@ -1,5 +1,5 @@
 """CI check of `jaxgest demo` outputs: every GIF has more than one frame, every BVH loads in an independent
-parser (tests/bvh_testing.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK,
+parser (tests/helpers/bvh_testing.py:reference_fk, scipy rotations) with the same joint positions as jaxgest's FK,
 the HTML viewer pages are there, self-contained, with their panels' clips as the BVH files (and, when
 headless Chromium is installed, draw without a JavaScript error or a request), and metrics.json holds finite
 numbers."""
@@ -13,7 +13,7 @@ import sys
 import numpy as np
 from PIL import Image
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests" / "helpers"))
 from browser_testing import Browser, find_chromium  # noqa: E402
 from bvh_testing import reference_fk  # noqa: E402
 

@@ -1,5 +1,2 @@
-"""jaxgest per-pose CPU cost benchmarks (SPEC §8): ``python -m benchmarks`` or ``jaxgest bench``.
-
-Not installed with the package: run from a clone (the repository root must be importable). ``harness``
-times and checks, ``report`` prints tables and plots, ``cases/`` holds the registered workloads.
-"""
+"""The benchmark suite moved into the package (:mod:`jaxgest.bench`); this folder keeps the stored results
+(``results/``) and ``python -m benchmarks`` as an alias of ``jaxgest bench``."""

@@ -5,13 +5,13 @@
 plus the log energy of each frame, interpolated to the motion rate with ``F = round(duration * fps)``
 frames. Files of any sample rate and channel count are read with soundfile and mixed down. Silent,
 constant and very short audio give finite features (the logs are floored); NaN/inf samples, unreadable
-files and empty audio raise :class:`~jaxgest.errors.AudioError` naming the file. By default the audio is
+files and empty audio raise :class:`~jaxgest.runtime.errors.AudioError` naming the file. By default the audio is
 first loudness-normalised to -20 LUFS (ITU-R BS.1770 integrated loudness, K-weighted and gated, in
 NumPy + scipy.signal, which librosa already depends on), as the authors' pipeline does with pyloudnorm;
 audio below the -70 LUFS gate (silence) is left as it is.
 
 References: Ghorbani et al. 2023, §3.1 and §4.1 (log-amplitude mel spectrogram, 80 channels, total frame
-energy, FFT Hanning window of 50 ms, hop 12.5 ms, resampled to the animation rate, normalised); SPEC §4
+energy, FFT Hanning window of 50 ms, hop 12.5 ms, resampled to the animation rate, normalised); docs/design.md §4
 (the authors' code: fmin 20 Hz, fmax 7600 Hz, pyloudnorm to -20 LUFS); ITU-R BS.1770-4 (loudness).
 """
 
@@ -24,8 +24,8 @@ from typing import Optional, Union
 
 import numpy as np
 
-from jaxgest.errors import AudioError, CheckpointError
-from jaxgest.io import write_text_atomic
+from jaxgest.runtime.errors import AudioError, CheckpointError
+from jaxgest.runtime.io import write_text_atomic
 
 N_MELS = 80
 FEATURE_DIM = N_MELS + 1
@@ -128,7 +128,7 @@ def normalize_loudness(y: np.ndarray, sr: float, target_lufs: float = LOUDNESS_L
 
     Audio whose loudness is below the absolute gate (silence, DC, near-silence) is returned unchanged, so
     its features stay finite. The authors' data pipeline normalises every recording to -20 LUFS before
-    feature extraction. References: ITU-R BS.1770-4; SPEC §4.
+    feature extraction. References: ITU-R BS.1770-4; docs/design.md §4.
     """
     y = np.asarray(y, np.float32)
     loud = integrated_loudness(y, sr) if y.size else -np.inf
@@ -214,7 +214,7 @@ class FeatureStats:
         """JSON (any suffix but ``.npz``) or NumPy ``.npz`` with arrays ``mean`` and ``std``."""
         path = pathlib.Path(path)
         if path.suffix == ".npz":
-            from jaxgest.io import atomic_output
+            from jaxgest.runtime.io import atomic_output
 
             with atomic_output(path) as tmp:
                 with open(tmp, "wb") as f:  # a file object: np.savez would append ".npz" to a name

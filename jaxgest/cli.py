@@ -1,13 +1,13 @@
-"""The ``jaxgest`` command line (SPEC §6). Thin: parse, then call the api modules.
+"""The ``jaxgest`` command line (docs/design.md §6). Thin: parse, then call the api modules.
 
-Each command group lives beside its code and exposes ``register(subparsers)``; the registered parser
-sets ``func`` to a callable ``func(args) -> int | None``. Every :class:`jaxgest.errors.JaxgestError`, and
+Each command group lives in :mod:`jaxgest.commands` and exposes ``register(subparsers)``; the registered parser
+sets ``func`` to a callable ``func(args) -> int | None``. Every :class:`jaxgest.runtime.errors.JaxgestError`, and
 every ``OSError`` no module handled (a full or read-only disk, ...), becomes one line on stderr and exit
 status 2. Every command that reads a workdir gets ``--strict`` (refuse an unreadable checkpoint instead of
 falling back to an older one).
 
 The command owns its process, so it (and only it) installs the process-wide filter of asyncio's "Event loop
-is closed" noise (:func:`jaxgest.orbax_noise.mute_closed_loop_errors_for_process`); library code scopes it.
+is closed" noise (:func:`jaxgest.runtime.orbax_noise.mute_closed_loop_errors_for_process`); library code scopes it.
 
 Progress bars (tqdm, drawn on stderr) are shown only when stderr is a terminal: when it is a file or a
 pipe, the bars' carriage-return redraws are dropped, so a failed command's stderr is exactly its one-line
@@ -18,22 +18,19 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib
 import io
-import pathlib
 import sys
-from typing import Optional
 
-from jaxgest.errors import JaxgestError
+from jaxgest.commands import bench, data, demo, tgst, zeggs
+from jaxgest.runtime.errors import JaxgestError
 
-# Modules that contribute subcommands, in help order. A module that fails to import is a bug, not a
-# user error, so it is not hidden.
+# Modules that contribute subcommands, in help order (each imports its heavy parts inside its commands).
 COMMAND_MODULES = (
-    "jaxgest.commands.data",  # synth, render
-    "jaxgest.tgst.cli",  # tgst ...
-    "jaxgest.zeggs.cli",  # zeggs ...
-    "jaxgest.commands.demo",  # demo, pipeline
-    "jaxgest.commands.bench",  # bench
+    data,  # synth, render
+    tgst,  # tgst ...
+    zeggs,  # zeggs ...
+    demo,  # demo, pipeline
+    bench,  # bench
 )
 
 
@@ -52,7 +49,7 @@ def _leaf_parsers(parser: argparse.ArgumentParser):
 
 def add_strict_flag(parser: argparse.ArgumentParser) -> None:
     """``--strict`` on every command that reads a workdir's checkpoints: refuse an unreadable checkpoint
-    instead of falling back to the newest readable one (:func:`jaxgest.checkpoint.strict_checkpoints`)."""
+    instead of falling back to the newest readable one (:func:`jaxgest.runtime.checkpoint.strict_checkpoints`)."""
     for p in _leaf_parsers(parser):
         options = {o for a in p._actions for o in a.option_strings}
         if options & set(WORKDIR_OPTIONS) and "--strict" not in options:
@@ -61,51 +58,13 @@ def add_strict_flag(parser: argparse.ArgumentParser) -> None:
                                 "readable one")
 
 
-LOG_EVERY = 50  # default --log-every of every train command
-
-
-def add_train_arguments(parser: argparse.ArgumentParser, *, presets, data_help: str, workdir_help: str,
-                        steps_help: str, ckpt_every: Optional[int] = 500,
-                        ckpt_help: str = "checkpoint every N steps (and at the end)") -> None:
-    """The arguments every ``<model> train`` command shares, with one set of defaults: ``--data``,
-    ``--workdir``, ``--preset``, ``--steps``, ``--seed``, ``--devices``, ``--ckpt-every``, ``--log-every``.
-    Pass the parsed namespace to :func:`training_data` for the data folder."""
-    parser.add_argument("--data", default=None, help=data_help)
-    parser.add_argument("--workdir", required=True, help=workdir_help)
-    parser.add_argument("--preset", default="tiny", choices=tuple(presets))
-    parser.add_argument("--steps", type=int, default=None, help=steps_help)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--devices", type=int, default=None, help="use the first N devices (data parallel)")
-    parser.add_argument("--ckpt-every", type=int, default=ckpt_every, help=ckpt_help)
-    parser.add_argument("--log-every", type=int, default=LOG_EVERY,
-                        help=f"metrics.jsonl line every N steps (default {LOG_EVERY})")
-
-
-def training_data(args: argparse.Namespace) -> pathlib.Path:
-    """The data folder of a train command: ``--data``, or the built-in synthetic data written once to
-    ``<workdir>/synthetic-data`` (:func:`jaxgest.motion.synthetic.dataset.training_folder`). The step counts
-    and intervals are checked first, so a bad argument writes nothing."""
-    from jaxgest.motion.synthetic.dataset import training_folder
-    from jaxgest.training import check_intervals, check_steps
-
-    check_steps(**{k: getattr(args, k) for k in ("steps", "ae_steps", "transformer_steps") if hasattr(args, k)})
-    check_intervals(log_every=args.log_every, ckpt_every=args.ckpt_every)
-    return training_folder(args.data, args.workdir, progress=True)
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="jaxgest",
         description="Gesture animation in JAX: tokenized style transfer (TGST) and ZeroEGGS.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as e:
-            if e.name == name:  # not written yet
-                continue
-            raise
+    for module in COMMAND_MODULES:
         module.register(sub)
     add_strict_flag(parser)
     return parser
@@ -155,8 +114,8 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    from jaxgest.checkpoint import strict_checkpoints
-    from jaxgest.orbax_noise import mute_closed_loop_errors_for_process
+    from jaxgest.runtime.checkpoint import strict_checkpoints
+    from jaxgest.runtime.orbax_noise import mute_closed_loop_errors_for_process
 
     # the command owns the process: asyncio "Event loop is closed" noise of a damaged checkpoint's reads can
     # still surface at interpreter exit, after every Checkpointer is closed

@@ -7,7 +7,7 @@ for speech-driven gesture generation; :func:`speech_to_styled_gestures` is that 
    ``zeggs_style`` (a neutral reference clip, or any clip; default: the style exemplar itself);
 2. TGST (:mod:`jaxgest.tgst.api`) transfers that motion to the style of the exemplar ``style``
    (content = the generated motion, whose timing follows the speech);
-3. the result is put on the exemplar's skeleton (:func:`jaxgest.motion.retarget.to_rig`: through the joint
+3. the result is put on the exemplar's skeleton (:func:`jaxgest.motion.body.to_rig`: through the joint
    maps with the feet on the floor when the rigs differ) and has ``round(duration x fps)`` frames at the
    exemplar's frame rate.
 
@@ -20,8 +20,8 @@ import pathlib
 import time
 from typing import Optional
 
-from jaxgest.errors import DataError
-from jaxgest.motion.retarget import to_rig
+from jaxgest.runtime.errors import DataError
+from jaxgest.motion.body import to_rig
 from jaxgest.motion.skeleton import Motion
 
 

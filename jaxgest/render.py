@@ -16,8 +16,8 @@ from typing import Optional, Sequence, Union
 
 import numpy as np
 
-from jaxgest.errors import DataError
-from jaxgest.io import atomic_output, check_output_path
+from jaxgest.runtime.errors import DataError
+from jaxgest.runtime.io import atomic_output, check_output_path
 from jaxgest.motion.skeleton import Motion
 
 YAW_DEG = 25.0  # 3/4 view: the camera sits front-right of the character
@@ -187,7 +187,7 @@ def render_gif(
 
     Args:
       motions: a Motion or a list of Motions (one panel each; shorter clips hold their last frame).
-      out_path: the .gif to write (atomically, :func:`jaxgest.io.atomic_output`).
+      out_path: the .gif to write (atomically, :func:`jaxgest.runtime.io.atomic_output`).
       titles: one title per panel, or None.
       fps: GIF frame rate; default ``min(motion fps, 20)``, frames are subsampled in time.
       max_seconds: render at most this many seconds.

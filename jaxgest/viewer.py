@@ -30,8 +30,8 @@ from typing import Optional, Sequence, Union
 
 import numpy as np
 
-from jaxgest.errors import DataError
-from jaxgest.io import atomic_output, check_output_path
+from jaxgest.runtime.errors import DataError
+from jaxgest.runtime.io import atomic_output, check_output_path
 from jaxgest.motion.skeleton import Motion
 from jaxgest.render import COLORS, _as_list, _side, _titles
 

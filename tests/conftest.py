@@ -1,9 +1,17 @@
-"""Shared test configuration (STYLE.md): strict rank promotion, 4 fake CPU devices, a `key` fixture, data
-paths, and the session's tiny trained models.
+"""Shared test configuration: strict rank promotion, 4 fake CPU devices, a `key` fixture, data paths, the
+session's tiny trained models, test kinds and hypothesis profiles.
+
+Kinds. ``tests/unit``, ``tests/property`` (hypothesis), ``tests/integration`` (CLI, subprocesses,
+kill/resume, multi-device) and ``tests/research`` (checks of experiment results); helpers in ``tests/helpers``
+(on the path). Every hypothesis test, wherever it lives, gets the ``property`` marker (``pytest -m property``).
+Tests marked ``research`` (long model trainings) are left out of the default run (``pytest -m research``).
+
+Hypothesis profiles: ``ci`` (the default: derandomized, no deadline, each test's own ``max_examples``) and
+``thorough`` (ten times each test's examples, random): ``HYPOTHESIS_PROFILE=thorough pytest -m property``.
 
 Devices. The process sees ``NUM_DEVICES`` = 4 fake CPU devices (``jax_num_cpu_devices``, set before the
-backend starts), so the data-parallel tests run in-process (tests/test_parallel.py). Everything else keeps
-running on ONE device: while the tests run, :func:`jaxgest.parallel.make_mesh` called without a device count
+backend starts), so the data-parallel tests run in-process (tests/integration/test_parallel.py). Everything else keeps
+running on ONE device: while the tests run, :func:`jaxgest.runtime.parallel.make_mesh` called without a device count
 (training without ``--devices``) builds a 1-device mesh, as on a one-device machine; a test that wants every
 device passes the count (``devices=4`` / ``--devices 4``) or uses the ``all_devices`` fixture, which restores
 the package's own default (all visible devices).
@@ -28,6 +36,7 @@ import os
 import pathlib
 import shutil
 
+import hypothesis
 import jax
 import pytest
 
@@ -40,7 +49,13 @@ jax.config.update("jax_num_cpu_devices", NUM_DEVICES)  # before anything starts 
 # not us; our modules cast explicitly instead.
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
-from jaxgest import parallel  # noqa: E402  (after the device count is configured)
+hypothesis.settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
+hypothesis.settings.register_profile("thorough", deadline=None, print_blob=True)
+hypothesis.settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))  # before the test modules import
+#: each test's max_examples is multiplied by this (the profiles cannot raise a test's own explicit setting)
+THOROUGH_FACTOR = 10
+
+from jaxgest.runtime import parallel  # noqa: E402  (after the device count is configured)
 from tiny_models import train_tgst, train_zeggs  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -108,7 +123,23 @@ def pytest_configure(config):
         _warm_numba_cache()
 
 
+def _scale_examples(function, factor: int) -> None:
+    """Multiply a hypothesis test's own ``max_examples`` (its settings live on the wrapped function)."""
+    own = getattr(function, "_hypothesis_internal_use_settings", None)
+    if own is not None:
+        function._hypothesis_internal_use_settings = hypothesis.settings(own, max_examples=own.max_examples * factor)
+
+
 def pytest_collection_modifyitems(config, items):
+    thorough = hypothesis.settings._current_profile == "thorough"
+    scaled = set()
+    for item in items:
+        function = getattr(item, "function", None)
+        if function is not None and hypothesis.is_hypothesis_test(function):
+            item.add_marker(pytest.mark.property)
+            if thorough and id(function) not in scaled:  # parametrized tests share one function
+                scaled.add(id(function))
+                _scale_examples(function, THOROUGH_FACTOR)
     rank = {name: i for i, name in enumerate(COSTLIEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the others keep their order
 

@@ -6,7 +6,7 @@
 
 The cache holds the body exp-maps of the training clips (original + T-pose mirror, content labels) and of
 the held-out clips, at the model rate, so each run starts training in seconds. A run trains the autoencoder
-of the `fit` preset (config overrides as ``key=value``: dotted paths of ``jaxgest.tgst.train.apply_overrides``,
+of the `fit` preset (config overrides as ``key=value``: dotted paths of ``jaxgest.tgst.trainer.apply_overrides``,
 e.g. ``autoencoder.latent_activation=False``) with the preset's own step, batches and schedule shortened to
 STEPS, and reports: loss curve, per-layer gradient norms at the end, the fraction of latent channels that
 are (nearly) constant, and the mean geodesic angle (upper body, degrees) of
@@ -111,7 +111,7 @@ def run(name, steps, args):
     from jaxgest.tgst.autoencoder import expmap_reconstruction_loss
     from jaxgest.tgst import model as tmodel
     from jaxgest.tgst.config import preset
-    from jaxgest.tgst.train import ae_learning_rate, apply_overrides
+    from jaxgest.tgst.trainer import ae_learning_rate, apply_overrides
 
     special = {k: v for k, v in args.items() if k in ("act", "loss", "subset", "clips", "seed")}
     overrides = {k: v for k, v in args.items() if k not in special}

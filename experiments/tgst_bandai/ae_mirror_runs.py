@@ -17,7 +17,7 @@ import sys
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 from jaxgest.tgst import data as tdata  # noqa: E402
-from jaxgest.tgst.train import format_summary, train  # noqa: E402
+from jaxgest.tgst.trainer import format_summary, train  # noqa: E402
 from overrides import parse_value  # noqa: E402
 
 

@@ -6,7 +6,7 @@
 Data: out/ae_cache.npz (``ae_cause.py cache``: training clips original + T-pose mirror at the model rate, the
 30 held-out clips); the held-out BVH files (out/data_eval) give the skeletons of the round-trip motions. A run
 starts from preset ``fit-pca`` (``preset=NAME`` for another), applies ``key=value`` config overrides (dotted
-paths of ``jaxgest.tgst.train.apply_overrides``, e.g. ``autoencoder.linear_context=1``,
+paths of ``jaxgest.tgst.trainer.apply_overrides``, e.g. ``autoencoder.linear_context=1``,
 ``train.autoencoder.init_velocity_weight=64.0``), shortens the cosine schedule to STEPS, initialises the linear path
 (:func:`jaxgest.tgst.autoencoder.init_linear_path` on the original + mirrored training clips, with
 ``init_velocity_weight``) and trains STEPS Adam steps with the training step of ``jaxgest tgst train``
@@ -72,7 +72,7 @@ def run(name, steps, args):
     from jaxgest.tgst.autoencoder import angular_error_rad
     from jaxgest.tgst.config import preset
     from jaxgest.tgst.steps import make_ae_train_step
-    from jaxgest.tgst.train import ae_learning_rate, apply_overrides
+    from jaxgest.tgst.trainer import ae_learning_rate, apply_overrides
 
     seed = int(args.pop("seed", 0))
     base = args.pop("preset", "fit-pca")

@@ -7,9 +7,9 @@ Each held-out clip x is re-encoded and decoded (``jaxgest.tgst.model.reconstruct
 resampled and written on x's skeleton with x's root path (``body.body_to_motion(..., floor=False)``: the
 content's own root height), then its root height is set by each contact variant:
 
-* ``frame``: the per-frame contact (``content_floor_contact(tolerance=0)`` = ``K.floor_contact``): the
+* ``frame``: the per-frame contact (``content_floor_contact(tolerance=0)`` = ``RM.floor_contact``): the
   lowest foot/toe joint at the content's lowest foot/toe height on every frame;
-* ``tube_T`` (T in cm): ``K.floor_contact_tube`` with tolerance T on the content's contact frames
+* ``tube_T`` (T in cm): ``RM.floor_contact_tube`` with tolerance T on the content's contact frames
   (``api.content_contact_frames``: the content's lowest foot joint within 1 cm of its clip minimum, the
   frames of the issue's foot criterion, as tests/test_tgst_api.py defines them), the other frames free;
   ``tube_0`` differs from ``frame`` only on the non-contact frames;
@@ -73,7 +73,8 @@ def lazy_path(lo, hi) -> np.ndarray:
 def main(argv) -> int:
     from jaxgest import metrics
     from jaxgest.motion import body, datasets
-    from jaxgest.motion import kinematics as K
+    from jaxgest.motion import kinematics as
+    from jaxgest.motion import root_motion as RM K
     from jaxgest.tgst import api
     from jaxgest.tgst import model as tmodel
     from jaxgest.tgst.autoencoder import angular_error_rad
@@ -96,23 +97,23 @@ def main(argv) -> int:
         angle = float(np.degrees(np.asarray(angular_error_rad(u_hat, up))).mean())
         F = x.num_frames
         feet = api.foot_names(x.skeleton)
-        c_low = K.lowest_foot_height(x, feet)
+        c_low = RM.lowest_foot_height(x, feet)
         contact = api.content_contact_frames(x)
         written = {}
         for legs, lower in (("decoded", l_hat), ("true", lo)):
             u = api.resample_body(u_hat, cfg.fps, x.fps, F)
             w = api.resample_body(lower, cfg.fps, x.fps, F)
             written[legs] = body.body_to_motion(u, w, x, floor=False)
-        s = c_low - K.lowest_foot_height(written["decoded"], feet)  # per-frame shift of today's contact
+        s = c_low - RM.lowest_foot_height(written["decoded"], feet)  # per-frame shift of today's contact
         variants = {"frame": api.content_floor_contact(written["decoded"], x, tolerance=0.0),
                     "content_root": written["decoded"],
                     "true_legs": api.content_floor_contact(written["true"], x, tolerance=0.0),
                     "true_legs_tube_0.9": api.content_floor_contact(written["true"], x, tolerance=0.9)}
         for tol in TOLS:
-            variants[f"tube_{tol:g}"] = K.floor_contact_tube(written["decoded"], feet=feet, height=c_low,
+            variants[f"tube_{tol:g}"] = RM.floor_contact_tube(written["decoded"], feet=feet, height=c_low,
                                                              tolerance=tol, contact=contact)
         lazy = lazy_path(np.where(contact, s - 0.9, -np.inf), np.where(contact, s + 0.9, np.inf))
-        variants["lazy_0.9"] = K.shift_root_height(written["decoded"], lazy)
+        variants["lazy_0.9"] = RM.shift_root_height(written["decoded"], lazy)
         arms = _joint_indices(x, body.ARMS)
         sx = arm_speeds(x, arms)
         fx = {}
@@ -131,12 +132,12 @@ def main(argv) -> int:
                        "tv_cm": float(np.abs(np.diff(s)).sum()),
                        "content_root_vertical_speed_cm_s": float(np.abs(np.diff(hips)).mean() * x.fps)},
              "variants": {}}
-        ref_y = K.lowest_foot_height(written["decoded"], feet)
+        ref_y = RM.lowest_foot_height(written["decoded"], feet)
         for name, y in variants.items():
             sy = arm_speeds(y, arms)
-            o_low = K.lowest_foot_height(y, feet)
+            o_low = RM.lowest_foot_height(y, feet)
             dev = np.abs(o_low - c_low)[contact]
-            base = K.lowest_foot_height(written["true"], feet) if name.startswith("true") else ref_y
+            base = RM.lowest_foot_height(written["true"], feet) if name.startswith("true") else ref_y
             shift_path = o_low - base
             v = {"speed_ratio": float(sy.mean() / sx.mean()),
                  "speed_ratio_0_5": float(sy[:6].mean() / sx[:6].mean()),

@@ -51,7 +51,7 @@ def load_params(workdir, ae_step=None, transformer=True):
     """(cfg, params) of a workdir; the transformer is optional (an autoencoder-only workdir)."""
     import pathlib
 
-    from jaxgest.tgst.train import ae_checkpointer, transformer_checkpointer
+    from jaxgest.tgst.trainer import ae_checkpointer, transformer_checkpointer
 
     stored = json.loads((pathlib.Path(workdir) / "config.json").read_text())
     cfg = Config.from_dict(stored["config"]).model
@@ -260,12 +260,12 @@ def foot_criterion(y, x) -> dict:
     """Issue 12's foot criterion of an output ``y`` written on content ``x``: on x's contact frames
     (``api.content_contact_frames``) the largest |lowest foot/toe height of y - that of x| (file units, cm on
     Bandai-Namco) and the fraction of contact frames where it is below 1 cm."""
-    from jaxgest.motion import kinematics
+    from jaxgest.motion import root_motion
     from jaxgest.tgst import api
 
     feet = api.foot_names(x.skeleton)
     contact = api.content_contact_frames(x)
-    dev = np.abs(kinematics.lowest_foot_height(y, feet) - kinematics.lowest_foot_height(x, feet))[contact]
+    dev = np.abs(root_motion.lowest_foot_height(y, feet) - root_motion.lowest_foot_height(x, feet))[contact]
     return {"contact_frames": int(contact.sum()), "foot_max_dev": float(dev.max()) if len(dev) else 0.0,
             "foot_within_1cm": float((dev < 1.0).mean()) if len(dev) else 1.0}
 

@@ -24,7 +24,7 @@ import numpy as np
 from jaxgest.tgst import model as M
 from jaxgest.tgst.api import load_model
 from jaxgest.tgst.evaluate import evaluate
-from jaxgest.training import write_json_atomic
+from jaxgest.runtime.training import write_json_atomic
 
 
 @functools.partial(jax.jit, static_argnames=("cfg", "alpha"))

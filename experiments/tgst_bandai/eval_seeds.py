@@ -14,7 +14,7 @@ import argparse
 import sys
 
 from jaxgest.tgst.evaluate import evaluate, metric_validity
-from jaxgest.training import write_json_atomic
+from jaxgest.runtime.training import write_json_atomic
 
 
 def main(argv):

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import body, kinematics
 from jaxgest.motion.datasets import load_folder, resample_motion
 from jaxgest.tgst import model as M

@@ -5,7 +5,7 @@
 
 For each variant "<positions>-<similarity>" (transformer.token_positions = index | none, swap_similarity =
 dot | scaled) and seed: the autoencoder checkpoint AE_WORKDIR/checkpoints/autoencoder/AE_STEP is copied into
-OUT_DIR/<variant>-s<seed>, a transformer is trained on TRAIN_DIR (jaxgest.tgst.train.train with the
+OUT_DIR/<variant>-s<seed>, a transformer is trained on TRAIN_DIR (jaxgest.tgst.trainer.train with the
 overrides) and the soft-swap weights of every inter pair of EVAL_DIR are summarised (diagnose.swap_stats:
 mean largest weight, effective number of tokens, argmax within +-1 index of the query's own index and its
 chance). Clips are padded at the end (edge frames) to a multiple of 256 frames to share compilations; the
@@ -30,7 +30,7 @@ from diagnose import body_upper_lower, load_params, swap_stats  # noqa: E402
 from jaxgest.motion import datasets  # noqa: E402
 from jaxgest.tgst import model as tmodel  # noqa: E402
 from jaxgest.tgst.evaluate import make_pairs  # noqa: E402
-from jaxgest.tgst.train import AE_SUBDIR, train  # noqa: E402
+from jaxgest.tgst.trainer import AE_SUBDIR, train  # noqa: E402
 
 
 def bucket(x, multiple=256):

@@ -14,7 +14,7 @@ import sys
 
 from jaxgest.tgst.api import TGSTModel, load_model
 from jaxgest.tgst.evaluate import evaluate
-from jaxgest.training import write_json_atomic
+from jaxgest.runtime.training import write_json_atomic
 
 
 def main(argv):

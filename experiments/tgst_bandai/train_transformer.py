@@ -10,7 +10,7 @@ clip + its mirror as one token set, as the authors' trainer) or ``train.transfor
 import argparse
 import sys
 
-from jaxgest.tgst.train import format_summary, train
+from jaxgest.tgst.trainer import format_summary, train
 from overrides import parse_value
 
 

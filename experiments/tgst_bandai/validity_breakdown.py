@@ -19,7 +19,7 @@ import sys
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion.datasets import load_folder
 from jaxgest.tgst.evaluate import NEUTRAL, _FeatureCache, get_protocol
 

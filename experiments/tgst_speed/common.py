@@ -11,8 +11,8 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2]))
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from benchmarks.cases import peers  # noqa: E402
-from benchmarks.cases import tgst as T  # noqa: E402
+from jaxgest.bench.cases import peers  # noqa: E402
+from jaxgest.bench.cases import tgst as T  # noqa: E402
 from jaxgest.tgst import model as M  # noqa: E402
 
 

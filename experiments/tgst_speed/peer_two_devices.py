@@ -1,4 +1,4 @@
-"""The peer benchmark's TGST case (`benchmarks.cases.peers.tgst_case`, its harness and interleaved rounds)
+"""The peer benchmark's TGST case (`jaxgest.bench.cases.peers.tgst_case`, its harness and interleaved rounds)
 with one more implementation: the batch split over 2 host devices.
 
     python peer_two_devices.py BATCH        (env R: repeats, default 9; NO_TORCH=1: the two jit impls alone)
@@ -12,8 +12,8 @@ import numpy as np  # noqa: E402
 from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
 
 from common import transfer_case  # noqa: E402  (puts the repository on the path)
-from benchmarks import harness as H  # noqa: E402
-from benchmarks.cases import peers  # noqa: E402
+from jaxgest.bench import harness as H  # noqa: E402
+from jaxgest.bench.cases import peers  # noqa: E402
 
 H.configure_jax()
 b = int(sys.argv[1])

@@ -20,7 +20,7 @@ import time
 
 import jax
 
-from benchmarks.cases.peers import tgst_case
+from jaxgest.bench.cases.peers import tgst_case
 
 
 def main(batch: int = 8, rounds: int = 15, inner: int = 5) -> dict:

@@ -50,7 +50,7 @@ def main():
     from jaxgest.zeggs import features
     from jaxgest.zeggs.config import field_names
     from jaxgest.zeggs.steps import loss_terms
-    from jaxgest.zeggs.train import train
+    from jaxgest.zeggs.trainer import train
     from jaxgest.zeggs.workdir import load_workdir
 
     out = pathlib.Path(args.out)

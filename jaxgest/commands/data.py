@@ -1,10 +1,10 @@
-"""``jaxgest synth`` and ``jaxgest render`` (SPEC §6): built-in data and stick-figure animations."""
+"""``jaxgest synth`` and ``jaxgest render`` (docs/design.md §6): built-in data and stick-figure animations."""
 
 from __future__ import annotations
 
 import pathlib
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 
 def register(subparsers) -> None:

@@ -1,4 +1,4 @@
-"""``jaxgest demo`` (the main job) and ``jaxgest pipeline`` (speech -> gestures -> style), SPEC §6.
+"""``jaxgest demo`` (the main job) and ``jaxgest pipeline`` (speech -> gestures -> style), docs/design.md §6.
 
 The demo runs everything on the built-in synthetic data, with no download and no GPU:
 
@@ -25,7 +25,7 @@ import json
 import pathlib
 import time
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.tgst.model import METHODS
 
 #: (synthetic clips, seconds, TGST AE steps, TGST transformer steps, ZEGGS steps, GIF seconds)
@@ -69,7 +69,7 @@ def _load_bvh(path):
 
 
 def _pipeline(args) -> int:
-    from jaxgest.io import check_output_path
+    from jaxgest.runtime.io import check_output_path
     from jaxgest.motion import bvh
     from jaxgest.pipeline import speech_to_styled_gestures
 
@@ -112,7 +112,7 @@ def _round(x, nd=4):
 
 def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) -> dict:
     """Run the whole demo into ``out``; returns the metrics dict (also written to ``out/metrics.json``)."""
-    from jaxgest.io import check_output_path
+    from jaxgest.runtime.io import check_output_path
     from jaxgest.motion import bvh
     from jaxgest.audio import load_audio
     from jaxgest.motion.datasets import load_folder
@@ -122,11 +122,11 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     from jaxgest.viewer import render_html
     from jaxgest.tgst import evaluate as tev
     from jaxgest.tgst.api import load_model as load_tgst
-    from jaxgest.tgst.train import train as train_tgst
-    from jaxgest.training import write_json_atomic
+    from jaxgest.tgst.trainer import train as train_tgst
+    from jaxgest.runtime.training import write_json_atomic
     from jaxgest.zeggs import evaluate as zev
     from jaxgest.zeggs.inference import load_model as load_zeggs
-    from jaxgest.zeggs.train import train as train_zeggs
+    from jaxgest.zeggs.trainer import train as train_zeggs
 
     plan = PLANS["quick" if quick else "full"]
     out = pathlib.Path(out)

@@ -1,6 +1,6 @@
 """Evaluation metrics: exact DTW (JAX), content / style errors (paper 000 §4.2), generation metrics.
 
-References: Kuriyama et al. 2022, §4.2, eqs. 13-16; SPEC §5 for the ZeroEGGS metrics.
+References: Kuriyama et al. 2022, §4.2, eqs. 13-16; docs/design.md §5 for the ZeroEGGS metrics.
 """
 
 from jaxgest.metrics.dtw import dtw, dtw_numpy, dtw_wavefront, path_distances

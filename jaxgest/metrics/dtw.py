@@ -1,7 +1,7 @@
 """Exact dynamic time warping: a JAX anti-diagonal wavefront and a plain NumPy reference.
 
 The paper aligns clips with FastDTW [Salvador & Chan 2007], a linear-time *approximation* of DTW. Following
-SPEC §5 we compute the exact DTW it approximates (same step pattern, same Euclidean frame distance, same
+docs/design.md §5 we compute the exact DTW it approximates (same step pattern, same Euclidean frame distance, same
 cost convention), so a FastDTW cost is always >= ours.
 
 Conventions (shared by :func:`dtw` and :func:`dtw_numpy`):
@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 # Predecessor codes stored by the forward pass.
 _DIAG, _UP, _LEFT = 0, 1, 2
@@ -145,7 +145,7 @@ def dtw(a, b) -> tuple[float, np.ndarray]:
     path: (K, 2) int64, max(N, M) <= K <= N + M - 1. Not traceable itself (NumPy backtracking).
 
     References: Sakoe & Chiba 1978 (exact DTW); the quantity FastDTW approximates in Kuriyama et al. 2022,
-    eq. 14 (SPEC §5: exact DTW in place of FastDTW).
+    eq. 14 (docs/design.md §5: exact DTW in place of FastDTW).
     """
     a, b = _check_pair(a, b)
     n, m = len(a), len(b)

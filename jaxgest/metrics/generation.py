@@ -1,4 +1,4 @@
-"""Objective metrics for speech-driven generation (ZeroEGGS) and style embeddings (SPEC §5).
+"""Objective metrics for speech-driven generation (ZeroEGGS) and style embeddings (docs/design.md §5).
 
 Paper 001 evaluates with user studies only (naturalness, appropriateness, style portrayal, §5.3); its
 "mismatched motion" (MM) control motivates :func:`shuffled_beat_alignment`. The objective stand-ins here are
@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from jaxgest.errors import AudioError, DataError
+from jaxgest.runtime.errors import AudioError, DataError
 
 # --------------------------------------------------------------------------------------------------------
 # Linear probe
@@ -41,7 +41,7 @@ def linear_probe_predict(train_emb, train_labels: Sequence, test_emb, *, l2: flo
     no iterative training. One fit predicts any number of test rows (:func:`linear_probe_accuracy` scores them).
 
     References: linear evaluation protocol of representation learning (e.g. Alain & Bengio 2016, linear
-    probes); applied to ZeroEGGS style embeddings (Ghorbani et al. 2023, §5.2) per SPEC §5.
+    probes); applied to ZeroEGGS style embeddings (Ghorbani et al. 2023, §5.2) per docs/design.md §5.
     """
     xtr = _embeddings(train_emb, "linear_probe: train_emb")
     xte = _embeddings(test_emb, "linear_probe: test_emb")
@@ -72,7 +72,7 @@ def linear_probe_accuracy(
     training count as errors.
 
     References: linear evaluation protocol of representation learning (e.g. Alain & Bengio 2016, linear
-    probes); applied to ZeroEGGS style embeddings (Ghorbani et al. 2023, §5.2) per SPEC §5.
+    probes); applied to ZeroEGGS style embeddings (Ghorbani et al. 2023, §5.2) per docs/design.md §5.
     """
     pred = linear_probe_predict(train_emb, train_labels, test_emb, l2=l2)
     yte = list(test_labels)
@@ -183,7 +183,7 @@ def beat_alignment(beats_s, onsets_s, *, sigma: float = 0.1) -> float:
     beats_s: (B,) kinematic beat times (:func:`kinematic_beats`), onsets_s: (K,) speech onset times
     (:func:`onset_times`), both in seconds; sigma in seconds (default 0.1). Higher is better; compare with
     :func:`shuffled_beat_alignment`. No onsets -> 0. No beats -> DataError (the mean is undefined).
-    References: Li et al. 2021 (AI Choreographer), Beat Alignment Score; SPEC §5 (ZEGGS beat alignment).
+    References: Li et al. 2021 (AI Choreographer), Beat Alignment Score; docs/design.md §5 (ZEGGS beat alignment).
     """
     b = np.asarray(beats_s, np.float64).reshape(-1)
     o = np.asarray(onsets_s, np.float64).reshape(-1)
@@ -263,7 +263,7 @@ def frechet_distance(feat_a, feat_b) -> float:
 
     Mean and unbiased covariance of each set (:func:`gaussian_statistics`), then
     :func:`frechet_distance_from_statistics`. Used for motion features of generated vs real clips.
-    References: Heusel et al. 2017 (FID); Yoon et al. 2020 (FGD for gestures); SPEC §5.
+    References: Heusel et al. 2017 (FID); Yoon et al. 2020 (FGD for gestures); docs/design.md §5.
     """
     mu_a, cov_a = gaussian_statistics(feat_a)
     mu_b, cov_b = gaussian_statistics(feat_b)

@@ -3,16 +3,16 @@
 Inputs are per-frame NumPy/JAX arrays; everything is computed in float64 NumPy except the DTW forward pass
 (see :mod:`jaxgest.metrics.dtw`). Each error returns ``{"mean", "worst", "w25"}`` as Python floats.
 
-Choices where the paper is open (SPEC §5), all documented in the functions:
+Choices where the paper is open (docs/design.md §5), all documented in the functions:
   * exact DTW instead of FastDTW (FastDTW approximates it; its cost is never lower);
   * w25 = mean of the ceil(25 %) largest components, at least one (the authors' code takes floor(n/4),
     which is empty -- NaN -- for fewer than 4 components);
   * windows of eq. 16 are every full window k*h .. k*h+theta-1 (0-based) with k*h + theta <= F; the authors'
     code stops one hop earlier when F - theta is a multiple of h;
   * std along frames is the population std (ddof = 0), as in the authors' code;
-  * the style features are velocities of the arm joints (§4.2 prose, SPEC, authors' code), although eq. 16
+  * the style features are velocities of the arm joints (§4.2 prose, docs/design.md, authors' code), although eq. 16
     writes hand positions;
-  * D_mean / D_std are, by default (``joint_dims=3``), the sum over joints of per-joint L2 norms (SPEC §5
+  * D_mean / D_std are, by default (``joint_dims=3``), the sum over joints of per-joint L2 norms (docs/design.md §5
     "sum over arm joints", the authors' code), which is the scale of the paper's Table 1 (1.0-2.65 there;
     1.4 on one Bandai-Namco pair, 8 arm joints in m/s, here); ``joint_dims=None`` gives one L2 norm over all
     channels (eq. 15 as literally written);
@@ -30,7 +30,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.metrics.dtw import dtw, path_distances
 from jaxgest.motion import kinematics
 
@@ -77,7 +77,7 @@ def content_error_components(content_hands, transfer_hands) -> np.ndarray:
 
     content_hands: (Fc, 6), transfer_hands: (Fx, 6) -- both hands' positions in metres (world or root-local,
     one protocol for both).
-    References: Kuriyama et al. 2022, eqs. 13-14 (exact DTW in place of FastDTW, SPEC §5).
+    References: Kuriyama et al. 2022, eqs. 13-14 (exact DTW in place of FastDTW, docs/design.md §5).
     """
     pc = _as_frames(content_hands, "content_error: content_hands", 6)
     px = _as_frames(transfer_hands, "content_error: transfer_hands", 6)
@@ -108,7 +108,7 @@ def content_error(content_hands, transfer_hands, *, trim: int = 0) -> dict:
 def window_for_fps(fps: float, theta_at_60: int = 128) -> int:
     """Style window theta scaled with the frame rate: round(theta_at_60 * fps / 60) (halves round up).
 
-    References: Kuriyama et al. 2022, §4.2 (theta = 128 at 60 fps); SPEC §5 (scale theta with the rate).
+    References: Kuriyama et al. 2022, §4.2 (theta = 128 at 60 fps); docs/design.md §5 (scale theta with the rate).
     """
     if not fps > 0 or theta_at_60 < 1:
         raise DataError(f"window_for_fps: need fps > 0 and theta_at_60 >= 1, got {fps} and {theta_at_60}")
@@ -147,7 +147,7 @@ def style_error_components(transfer_vel, style_vel, window: int, *, joint_dims: 
     """E_k^style = min_j D_mean(rho^x_k, rho^s_j) + D_std(rho^x_k, rho^s_j) for every transfer window k; ``(K,)``.
 
     D_mean / D_std: the sum over joints of per-joint L2 norms of the difference of the window means / stds
-    (``joint_dims=3``, default: SPEC §5 and the authors' code), or one L2 norm over all channels
+    (``joint_dims=3``, default: docs/design.md §5 and the authors' code), or one L2 norm over all channels
     (``joint_dims=None``, eq. 15 as literally written).
     References: Kuriyama et al. 2022, eqs. 15-16.
     """
@@ -164,10 +164,10 @@ def style_error(transfer_vel, style_vel, window: int, *, trim: int = 0, joint_di
 
     transfer_vel: (Fx, C), style_vel: (Fs, C) per-frame features -- the velocities (per second, e.g. m/s) of
     the arm joints, see :func:`arm_velocities`; the caller computes them (eq. 16 writes hand positions, §4.2
-    prose, SPEC §5 and the authors' code use arm-joint velocities). window: theta in frames
+    prose, docs/design.md §5 and the authors' code use arm-joint velocities). window: theta in frames
     (:func:`window_for_fps`; 128 at 60 fps), hop floor(theta / 2). ``trim`` cuts that many frames at both ends
     of both inputs first (default 0; the authors' code cuts 60 at 60 fps). ``joint_dims``: 3 (default) -> sum over
-    joints of per-joint norms (SPEC §5 "sum over arm joints", authors' code); None -> one L2 norm over all C
+    joints of per-joint norms (docs/design.md §5 "sum over arm joints", authors' code); None -> one L2 norm over all C
     channels (eq. 15 as literally written). Clips shorter than one window (after trimming) raise DataError.
 
     References: Kuriyama et al. 2022, eqs. 15-16 and §4.2 (mean / worst / worst 25 %).

@@ -1,4 +1,4 @@
-"""The papers' 21-joint body and the joint maps that bring any skeleton to it (SPEC §2).
+"""The papers' 21-joint body and the joint maps that bring any skeleton to it (docs/design.md §2).
 
 Kuriyama et al. 2022 (§3.1) represent a pose by the exponential maps of 21 joints: 13 upper-body joints
 (39 channels: the autoencoder's input) and 8 lower-body joints (24 channels: the lower decoder's output).
@@ -26,8 +26,10 @@ from typing import Optional
 
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import kinematics as K
+from jaxgest.motion import root_motion as RM
+from jaxgest.motion.datasets import fit_frames, resample_motion
 from jaxgest.motion import retarget as RT
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
@@ -207,7 +209,7 @@ def motion_to_body(motion: Motion, map_name: Optional[str] = None) -> BodyClip:
     sk = motion.skeleton
     hips = sk.index(jm["joints"]["Hips"])
     root_position = K.forward_kinematics(motion)[:, hips]
-    unyawed, yaw = K.remove_root_yaw(motion, root=sk.names[hips])
+    unyawed, yaw = RM.remove_root_yaw(motion, root=sk.names[hips])
     up = R.quat_to_expmap(unyawed.rotations[:, _indices(sk, jm, UPPER)])
     lo = R.quat_to_expmap(unyawed.rotations[:, _indices(sk, jm, LOWER)])
     F = motion.num_frames
@@ -244,20 +246,20 @@ def body_to_motion(upper: np.ndarray, lower: np.ndarray, template: Motion, *,
         body = body_to_motion(upper, lower, body_template, yaw=yaw, root_position=root_position, floor=False,
                               map_name="bandai_namco")
         out = retarget_from_body(body, template, map_name)
-        out = K.floor_contact(out) if floor else out
+        out = RM.floor_contact(out) if floor else out
         return out.replace(name=name or template.name)
     jm = load_map(map_name)
     sk = template.skeleton
     hips = sk.names[sk.index(jm["joints"]["Hips"])]
-    unyawed, own_yaw = K.remove_root_yaw(template, root=hips)
+    unyawed, own_yaw = RM.remove_root_yaw(template, root=hips)
     rot = unyawed.rotations.copy()
     rot[:, _indices(sk, jm, UPPER)] = R.expmap_to_quat(upper)
     rot[:, _indices(sk, jm, LOWER)] = R.expmap_to_quat(lower)
-    out = K.restore_root_yaw(unyawed.replace(rotations=rot), own_yaw if yaw is None else yaw, root=hips)
+    out = RM.restore_root_yaw(unyawed.replace(rotations=rot), own_yaw if yaw is None else yaw, root=hips)
     if root_position is not None:
-        out = K.set_root_position(out, root_position, root=hips)
+        out = RM.set_root_position(out, root_position, root=hips)
     if floor:
-        out = K.floor_contact(out, feet=[jm["joints"][n] for n in FEET])
+        out = RM.floor_contact(out, feet=[jm["joints"][n] for n in FEET])
     return out.replace(name=name or template.name)
 
 
@@ -295,3 +297,23 @@ def retarget_from_body(body_motion: Motion, template: Motion, map_name: Optional
     out = RT.retarget(body_motion, tpose_globals("bandai_namco"), template,
                       tpose_globals(map_name, template.skeleton), pairs)
     return out.replace(name=template.name)
+
+
+def to_rig(motion: Motion, template: Motion, *, fps: float | None = None, frames: int | None = None) -> Motion:
+    """Put ``motion`` on ``template``'s rig: the one rig transfer of the package (pipeline and ZeroEGGS).
+
+    Same joint names: the motion itself. Another rig: through the 21-joint body
+    (:func:`retarget_to_body` / ``retarget_from_body`` with ``template``'s first frame as
+    the target rest pose), then the root height is set per frame so the lowest foot/toe touches the floor
+    (:func:`jaxgest.motion.kinematics.floor_contact`): legs of another length neither float nor sink. Then
+    resampled to ``fps`` (None: kept) and cut or padded to ``frames`` (None: kept). The name is kept.
+    """
+    if motion.skeleton.names != template.skeleton.names:
+        first = template.replace(rotations=template.rotations[:1], translations=template.translations[:1])
+        moved = retarget_from_body(retarget_to_body(motion), first)
+        motion = RM.floor_contact(moved).replace(name=motion.name)
+    if fps is not None:
+        motion = resample_motion(motion, fps)
+    if frames is not None and frames != motion.num_frames:
+        motion = fit_frames(motion, frames)
+    return motion

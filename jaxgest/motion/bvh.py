@@ -1,4 +1,4 @@
-"""Strict BVH reader and writer (SPEC §2).
+"""Strict BVH reader and writer (docs/design.md §2).
 
 ``load(path) -> Motion`` and ``save(motion, path)``. The reader is strict: any problem raises
 :class:`BVHError` with ``"{file}:{line}: {reason}"``. Accepted: any Euler order per joint (a permutation of
@@ -22,13 +22,14 @@ The 174 Bandai-Namco files load in about 2 s on one core.
 from __future__ import annotations
 
 import io
+import os
 import pathlib
 import re
 
 import numpy as np
 
-from jaxgest.errors import DataError
-from jaxgest.io import atomic_output
+from jaxgest.runtime.errors import DataError
+from jaxgest.runtime.io import atomic_output
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion, Skeleton
 
@@ -426,3 +427,13 @@ def save(motion: Motion, path) -> None:
     text = dumps(motion)
     with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
         f.write(text)
+
+
+def as_motion(clip, what: str = "clip") -> Motion:
+    """``clip`` as a Motion: a Motion as is, a path (str or ``os.PathLike``) loaded with :func:`load`;
+    anything else a :class:`~jaxgest.runtime.errors.DataError` naming ``what``."""
+    if isinstance(clip, Motion):
+        return clip
+    if isinstance(clip, (str, os.PathLike)):
+        return load(clip)
+    raise DataError(f"{what}: expected a Motion or a BVH path, got {type(clip).__name__}")

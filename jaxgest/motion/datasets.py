@@ -1,6 +1,6 @@
 """Folder datasets (Bandai-Namco, ZEGGS, manifest.csv), random windows, normalisation stats, resampling.
 
-Layouts recognised by :func:`load_folder` (SPEC §6):
+Layouts recognised by :func:`load_folder` (docs/design.md §6):
 
 * ``manifest.csv`` with columns ``path, content, style[, audio]`` (paths relative to the folder) -- the
   built-in synthetic data (:mod:`jaxgest.motion.synthetic`) is written this way;
@@ -25,7 +25,7 @@ from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from jaxgest.errors import CheckpointError, DataError
+from jaxgest.runtime.errors import CheckpointError, DataError
 from jaxgest.motion import rotations as rot
 from jaxgest.motion.skeleton import Motion
 
@@ -205,7 +205,7 @@ def load_clip_audio(clip: Clip, sr: Optional[int] = None):
     """The clip's audio ``(samples,), sr`` aligned with its first frame (trim applied), mono float32."""
     import soundfile as sf
 
-    from jaxgest.errors import AudioError
+    from jaxgest.runtime.errors import AudioError
 
     if clip.audio is None:
         raise AudioError(f"{clip.path}: no audio file")

@@ -1,6 +1,6 @@
-"""Forward kinematics and velocities (SPEC §2); mirroring, root yaw and floor contact re-exported.
+"""Forward kinematics and velocities (docs/design.md §2); mirroring re-exported.
 
-Also the pieces of the authors' evaluation protocol (SPEC §5): :func:`root_local_positions` (root at the
+Also the pieces of the authors' evaluation protocol (docs/design.md §5): :func:`root_local_positions` (root at the
 origin, root rotation reset), :func:`forward_differences` and :func:`append_motion` (the mirrored style clip
 appended with a short slerp transition).
 
@@ -8,42 +8,24 @@ Motion-level functions take and return :class:`~jaxgest.motion.skeleton.Motion` 
 float64 (exact file-level numbers). :func:`fk_positions` is the batched ``jax.numpy`` version for use
 inside jit (losses, features); its parent array is static.
 
-SPEC §1 puts mirroring, yaw removal and floor contact here too; they live in
-:mod:`jaxgest.motion.mirroring` and :mod:`jaxgest.motion.root_motion` and stay importable from this module
-(``from jaxgest.motion.kinematics import mirror, remove_root_yaw, floor_contact`` etc.).
+docs/design.md §1 puts mirroring, yaw removal and floor contact here too; they live in
+:mod:`jaxgest.motion.mirroring` (re-exported here) and :mod:`jaxgest.motion.root_motion` (a layer above:
+it builds on this module's FK).
 """
 
 from __future__ import annotations
 
 import functools
-import importlib
 from typing import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import rotations as R
 from jaxgest.motion.mirroring import mirror, mirror_frames  # noqa: F401 (re-exported)
 from jaxgest.motion.skeleton import Motion, Skeleton, mirror_pairs, mirror_partner  # noqa: F401 (re-exported)
-from jaxgest.motion.taut_string import taut_string  # noqa: F401 (re-exported; floor_contact_tube's solver)
-
-# root_motion builds on this module's FK, so its names are re-exported lazily (PEP 562), not imported here
-_ROOT_MOTION = ("swing_twist", "remove_root_yaw", "restore_root_yaw", "set_root_position",
-                "FOOT_HINTS", "foot_joints", "lowest_foot_height", "floor_contact", "shift_root_height",
-                "floor_contact_tube")
-
-
-def __getattr__(name: str):
-    if name in _ROOT_MOTION:
-        return getattr(importlib.import_module("jaxgest.motion.root_motion"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(list(globals()) + list(_ROOT_MOTION))
-
 
 # ---------------------------------------------------------------------------------------------------
 # The root joint
@@ -110,7 +92,7 @@ def root_local_positions(motion: Motion, root: str | None = None) -> np.ndarray:
     ``joint_Root``, and of ZEGGS) unless ``root`` names another joint. Joints above the root get the same
     transform (they are static wrappers on both datasets).
     References: the authors' evaluator (``get_joint_positions(root_positions=None)`` in dataset/mocap.py:
-    "We also reset orientation of root"); SPEC §5 (authors' protocol).
+    "We also reset orientation of root"); docs/design.md §5 (authors' protocol).
     """
     r, _ = _root_and_parent(motion.skeleton, root)
     grot, gpos = global_transforms(motion)
@@ -178,7 +160,7 @@ def forward_differences(positions: np.ndarray, fps: float) -> np.ndarray:
 
     No frame is repeated or invented (unlike :func:`joint_velocities`), so every velocity is the exact
     displacement of one frame step: a constant-speed motion gives that speed at both ends.
-    References: the authors' evaluator (``60. * (x[1:] - x[:-1])`` in evaluator.py); SPEC §5.
+    References: the authors' evaluator (``60. * (x[1:] - x[:-1])`` in evaluator.py); docs/design.md §5.
     """
     positions = np.asarray(positions, np.float64)
     if len(positions) < 2:
@@ -194,7 +176,7 @@ def append_motion(first: Motion, second: Motion, transition: int = 0) -> Motion:
     ``second`` continues from its frame ``transition``: ``Fa + Fb - transition`` frames. ``transition`` is
     clamped to both lengths. Used to append the mirrored style clip as the authors' evaluator does
     (``MocapClip.append(mirrored, transit=True, period=30)`` at 60 fps).
-    References: the authors' dataset/mocap.py (``add_mirror_motion``, ``append``); SPEC §5.
+    References: the authors' dataset/mocap.py (``add_mirror_motion``, ``append``); docs/design.md §5.
     """
     if first.skeleton.num_joints != second.skeleton.num_joints:
         raise DataError("append_motion: the clips have different skeletons")

@@ -1,4 +1,4 @@
-"""Mirroring a motion about the sagittal plane, swapping left and right joints (SPEC §2).
+"""Mirroring a motion about the sagittal plane, swapping left and right joints (docs/design.md §2).
 
 :func:`mirror_frames` gives the per-joint reflections, :func:`mirror` applies them to a
 :class:`~jaxgest.motion.skeleton.Motion` (NumPy float64). Re-exported by :mod:`jaxgest.motion.kinematics`.

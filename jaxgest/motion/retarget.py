@@ -143,26 +143,3 @@ def _depth(sk: Skeleton, j: int) -> int:
         j = sk.parents[j]
         d += 1
     return d
-
-
-def to_rig(motion: Motion, template: Motion, *, fps: float | None = None, frames: int | None = None) -> Motion:
-    """Put ``motion`` on ``template``'s rig: the one rig transfer of the package (pipeline and ZeroEGGS).
-
-    Same joint names: the motion itself. Another rig: through the 21-joint body
-    (:func:`jaxgest.motion.body.retarget_to_body` / ``retarget_from_body`` with ``template``'s first frame as
-    the target rest pose), then the root height is set per frame so the lowest foot/toe touches the floor
-    (:func:`jaxgest.motion.kinematics.floor_contact`): legs of another length neither float nor sink. Then
-    resampled to ``fps`` (None: kept) and cut or padded to ``frames`` (None: kept). The name is kept.
-    """
-    from jaxgest.motion import body
-    from jaxgest.motion.datasets import fit_frames, resample_motion
-
-    if motion.skeleton.names != template.skeleton.names:
-        first = template.replace(rotations=template.rotations[:1], translations=template.translations[:1])
-        moved = body.retarget_from_body(body.retarget_to_body(motion), first)
-        motion = K.floor_contact(moved).replace(name=motion.name)
-    if fps is not None:
-        motion = resample_motion(motion, fps)
-    if frames is not None and frames != motion.num_frames:
-        motion = fit_frames(motion, frames)
-    return motion

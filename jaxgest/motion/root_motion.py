@@ -1,4 +1,4 @@
-"""The root joint: root-yaw removal/restoration, root position, floor contact (SPEC §2).
+"""The root joint: root-yaw removal/restoration, root position, floor contact (docs/design.md §2).
 
 Motion-level functions in NumPy float64 on top of :mod:`jaxgest.motion.kinematics` (which re-exports them).
 References: Kuriyama et al. 2022, §3.1 (root orientation and floor contact).
@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import rotations as R
 from jaxgest.motion.kinematics import (  # noqa: F401 (_hips_index re-exported)
     _hips_index, _root_and_parent, forward_kinematics, global_rotations, global_transforms)

@@ -1,4 +1,4 @@
-"""Rotation conversions: quaternions, exponential maps, matrices, 6-D, Euler angles (SPEC §7).
+"""Rotation conversions: quaternions, exponential maps, matrices, 6-D, Euler angles (docs/design.md §7).
 
 Conventions
 -----------
@@ -334,3 +334,14 @@ def quat_unroll(q, axis: int = 0):
         flip = np.sum(q[t] * q[t - 1], axis=-1) < 0
         q[t][flip] *= -1
     return np.moveaxis(q, 0, axis)
+
+
+def angular_error_rad(pred: jax.Array, target: jax.Array) -> jax.Array:
+    """Geodesic angle between the rotations of two exp-map arrays ``(..., 3J) -> (..., J)`` in [0, pi]."""
+    if pred.shape != target.shape:
+        raise ValueError(f"angular_error_rad: shapes differ, {pred.shape} vs {target.shape}")
+    shape = pred.shape[:-1] + (pred.shape[-1] // 3, 3)
+    qp = expmap_to_quat(jnp.reshape(pred, shape))
+    qt = expmap_to_quat(jnp.reshape(target, shape))
+    qt_conj = jnp.concatenate([qt[..., :1], -qt[..., 1:]], axis=-1)  # inverse of a unit quaternion
+    return quat_angle(quat_mul(qt_conj, qp))

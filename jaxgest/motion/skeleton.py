@@ -1,4 +1,4 @@
-"""Skeleton and Motion containers (SPEC §2).
+"""Skeleton and Motion containers (docs/design.md §2).
 
 These two frozen dataclasses are the contract every other module reads motion through.
 Arrays are NumPy (float64 on load); model code converts to ``jnp`` at its boundary.

@@ -1,9 +1,11 @@
-"""Public TGST entry points (SPEC.md §7): parameter counts, loading a trained workdir, Motion-level transfer.
+"""Public TGST entry points (docs/design.md §7): parameter counts, loading a trained workdir, Motion-level transfer.
 
 * :func:`count_params` -- parameter counts of a fresh model of a preset (shapes only).
-* :func:`load_model` -- a :class:`TGSTModel` from a workdir written by ``jaxgest tgst train``
-  (checkpoints found through :mod:`jaxgest.tgst.workdir`; :class:`ModelCache` keeps loaded ones).
-* :func:`transfer` -- ``transfer(content, style, *, workdir, method)``: what ``jaxgest tgst transfer`` calls.
+* :func:`load` (also ``load_model``) -- a :class:`TGSTModel` from a workdir written by ``jaxgest tgst
+  train`` (checkpoints found through :mod:`jaxgest.tgst.workdir`). The model owns its compiled functions
+  (one jit per transfer method, compiled per clip shape on first use); keep it to reuse them.
+* :func:`transfer` -- ``transfer(content, style, *, workdir, method)``: what ``jaxgest tgst transfer`` calls
+  (loads the workdir on every call).
 
 Transfer of two :class:`~jaxgest.motion.skeleton.Motion` clips on any mapped rig (Bandai-Namco, ZEGGS, the
 synthetic body), following §3.1 of the paper:
@@ -15,7 +17,7 @@ synthetic body), following §3.1 of the paper:
 3. the result is resampled back to the content's frame times (quaternion slerp), written onto the content's
    skeleton with the content's root yaw and horizontal root path (:func:`jaxgest.motion.body.body_to_motion`),
    and the root height is set per frame so the lowest foot/toe joint is where the content's lowest foot/toe
-   joint is on that frame (:meth:`TGSTModel.to_motion`, :func:`content_floor_contact`; paper §3.1, SPEC): the
+   joint is on that frame (:meth:`TGSTModel.to_motion`, :func:`content_floor_contact`; paper §3.1, docs/design.md §3): the
    result keeps the content's contact height (4.25 cm for the foot joints of a standing Bandai-Namco actor,
    not 0) and leaves the floor when the content does. ``tolerance > 0`` (not the paper's; off by default)
    keeps the lowest foot within that distance of the content's on its contact frames with the root's vertical
@@ -29,16 +31,14 @@ References: Kuriyama et al. 2022, §3.1 and Fig. 2.
 from __future__ import annotations
 
 import functools
-import pathlib
 from typing import Optional
 
 import jax
 import numpy as np
 
-from jaxgest import model_cache
-from jaxgest.errors import DataError
-from jaxgest.motion import body, datasets
-from jaxgest.motion import kinematics as K
+from jaxgest.runtime.errors import DataError
+from jaxgest.motion import body, bvh, datasets
+from jaxgest.motion import root_motion as RM
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion
 from jaxgest.tgst import workdir as W
@@ -47,23 +47,22 @@ from jaxgest.tgst.config import preset as preset_config
 from jaxgest.tgst.model import METHODS, init_params, transfer_arrays
 
 
-def count_params(preset: str = "paper") -> dict[str, int]:
-    """Parameter counts ``{"autoencoder": int, "transformer": int}`` of a fresh model of ``preset``.
+def count_params(preset="paper") -> dict[str, int]:
+    """Parameter counts ``{"autoencoder": int, "transformer": int}`` of a fresh model of ``preset`` (a preset
+    name, a :class:`~jaxgest.tgst.config.Config` or a :class:`~jaxgest.tgst.config.ModelConfig`).
 
     Computed with ``jax.eval_shape`` (no weights are materialised). Paper: 23,743 and 50,240.
     """
-    cfg = preset_config(preset).model
+    cfg = preset_config(preset) if isinstance(preset, str) else preset
+    cfg = cfg.model if isinstance(cfg, Config) else cfg
     shapes = jax.eval_shape(lambda k: init_params(cfg, k), jax.random.key(0))
     return {name: int(sum(x.size for x in jax.tree_util.tree_leaves(tree))) for name, tree in shapes.items()}
 
 
-#: :func:`transfer_arrays` under ``jax.jit``; jit's own cache keeps one compilation per (config, method, shapes)
-_transfer_jit = jax.jit(transfer_arrays, static_argnames=("cfg", "method"))
-
-
 def compiled_transfer(cfg: ModelConfig, method: str):
-    """The jit-compiled :func:`transfer_arrays` of one (config, method); one compilation per clip shape."""
-    return functools.partial(_transfer_jit, cfg=cfg, method=method)
+    """A new jit-compiled :func:`transfer_arrays` of one (config, method); one compilation per clip shape,
+    kept by the returned function (a :class:`TGSTModel` keeps one per method)."""
+    return jax.jit(functools.partial(transfer_arrays, cfg=cfg, method=method))
 
 
 def _check_method(method: str) -> None:
@@ -87,7 +86,8 @@ def resample_body(x: np.ndarray, src_fps: float, dst_fps: float, frames: int) ->
 
 
 class TGSTModel:
-    """A trained TGST model: config and both parameter pytrees; ``transfer`` works on Motions.
+    """A trained TGST model: config, both parameter pytrees and its compiled functions; ``transfer`` works on
+    Motions or BVH paths.
 
     Attributes:
       cfg: the :class:`~jaxgest.tgst.config.ModelConfig` of the networks.
@@ -104,6 +104,14 @@ class TGSTModel:
             config, cfg = cfg if config is None else config, cfg.model
         self.cfg, self.params, self.workdir = cfg, params, workdir
         self.config, self.steps = config, dict(steps or {})
+        self._compiled = {}  # method -> its jit-compiled transfer_arrays, owned by this model
+
+    def compiled(self, method: str):
+        """This model's jit-compiled :func:`transfer_arrays` for ``method`` (made on first use)."""
+        _check_method(method)
+        if method not in self._compiled:
+            self._compiled[method] = compiled_transfer(self.cfg, method)
+        return self._compiled[method]
 
     def min_frames(self, fps: float) -> int:
         """Shortest clip (frames at ``fps``) the model accepts: one token (16 frames) at the model rate."""
@@ -125,9 +133,7 @@ class TGSTModel:
 
     def transfer_body(self, content_upper: np.ndarray, style_upper: np.ndarray, method: str = "soft"):
         """Arrays at the model rate: ``(Fc, 39)``, ``(Fs, 39)`` -> (upper ``(Fc, 39)``, lower ``(Fc, 24)``)."""
-        _check_method(method)
-        fn = compiled_transfer(self.cfg, method)
-        up, lo, _ = fn(self.params, np.asarray(content_upper)[None], np.asarray(style_upper)[None])
+        up, lo, _ = self.compiled(method)(self.params, np.asarray(content_upper)[None], np.asarray(style_upper)[None])
         return np.asarray(up[0]), np.asarray(lo[0])
 
     def to_motion(self, upper: np.ndarray, lower: np.ndarray, content: Motion,
@@ -147,11 +153,14 @@ class TGSTModel:
         written = body.body_to_motion(up, lo, content, floor=False)
         return content_floor_contact(written, content, tolerance=tol)
 
-    def transfer(self, content: Motion, style: Motion, method: str = "soft", name: Optional[str] = None,
+    def transfer(self, content, style, method: str = "soft", name: Optional[str] = None,
                  tolerance: Optional[float] = None) -> Motion:
-        """``content`` performed in the style of ``style``, on the content's skeleton (module docstring);
-        ``tolerance``: the floor contact's (:meth:`to_motion`; default per frame)."""
+        """``content`` performed in the style of ``style``, on the content's skeleton (module docstring).
+
+        ``content`` / ``style``: Motions or BVH paths; ``method``: one of :data:`METHODS`; ``tolerance``:
+        the floor contact's (:meth:`to_motion`; default per frame)."""
         _check_method(method)
+        content, style = bvh.as_motion(content, "content"), bvh.as_motion(style, "style")
         cu = self.body_arrays(content, "content")
         su = self.body_arrays(style, "style")
         up, lo = self.transfer_body(cu, su, method)
@@ -166,7 +175,7 @@ def foot_names(skeleton) -> list[str]:
 
 CONTACT_TOLERANCE = 0.0
 """Default ``tolerance`` of :func:`content_floor_contact`: 0 = the per-frame contact of the paper (§3.1) and
-SPEC. A tolerance (file units: cm on Bandai-Namco and ZEGGS) is an option: 0.9 cm removes 90 % of the arm
+docs/design.md §3. A tolerance (file units: cm on Bandai-Namco and ZEGGS) is an option: 0.9 cm removes 90 % of the arm
 speed the per-frame contact adds on the held-out Bandai-Namco round trips, keeping the lowest foot joint
 within 1 cm of the content's on every contact frame (experiments/tgst_bandai/README.md, section 2c)."""
 CONTACT_BAND = 1.0
@@ -176,7 +185,7 @@ CONTACT_BAND = 1.0
 def content_contact_frames(content: Motion, band: float = CONTACT_BAND) -> np.ndarray:
     """``(F,)`` bools: the frames where ``content``'s lowest foot/toe joint is within ``band`` (file units)
     of its lowest height over the clip (standing or stepping, not in the air)."""
-    return _contact(K.lowest_foot_height(content, foot_names(content.skeleton)), band)
+    return _contact(RM.lowest_foot_height(content, foot_names(content.skeleton)), band)
 
 
 def _contact(low: np.ndarray, band: float = CONTACT_BAND) -> np.ndarray:
@@ -189,7 +198,7 @@ def content_floor_contact(result: Motion, content: Motion, tolerance: float = CO
     lowest foot/toe joint, within ``tolerance`` on the content's contact frames (same skeleton and frame
     count).
 
-    ``tolerance=0``: the per-frame contact of SPEC §3.1 on every frame (flight phases included:
+    ``tolerance=0``: the per-frame contact of docs/design.md §3 (paper §3.1) on every frame (flight phases included:
     :func:`jaxgest.motion.kinematics.floor_contact`). ``tolerance > 0``: on the contact frames
     (:func:`content_contact_frames`) the lowest foot joint stays within ``tolerance`` of the content's, the
     other frames (the content in the air) are free, and the root's vertical shift is the one of least total
@@ -202,18 +211,18 @@ def content_floor_contact(result: Motion, content: Motion, tolerance: float = CO
     it.
     """
     feet = foot_names(content.skeleton)
-    height = K.lowest_foot_height(content, feet)
+    height = RM.lowest_foot_height(content, feet)
     if tolerance == 0:
-        return K.floor_contact(result, feet=feet, height=height)
-    return K.floor_contact_tube(result, feet=feet, height=height, tolerance=tolerance,
+        return RM.floor_contact(result, feet=feet, height=height)
+    return RM.floor_contact_tube(result, feet=feet, height=height, tolerance=tolerance,
                                 contact=_contact(height))  # content_contact_frames without a second FK
 
 
-def load_model(workdir) -> TGSTModel:
+def load(workdir) -> TGSTModel:
     """Load the newest readable autoencoder and transformer checkpoints of a ``jaxgest tgst train`` workdir.
 
-    Not cached: every call restores the checkpoints (a long-lived caller keeps the returned model, or uses
-    :class:`ModelCache`). Raises CheckpointError when the workdir has no config.json or no checkpoint of
+    Every call restores the checkpoints (a long-lived caller keeps the returned model, which also keeps its
+    compiled functions). Raises CheckpointError when the workdir has no config.json or no checkpoint of
     either stage, or when the checkpoints do not match its config.
     """
     config = W.read_config(workdir)
@@ -221,28 +230,15 @@ def load_model(workdir) -> TGSTModel:
     return TGSTModel(config.model, params, workdir, config=config, steps=steps)
 
 
-class ModelCache(model_cache.ModelCache):
-    """Loaded TGST models (:class:`jaxgest.model_cache.ModelCache`), keyed on the workdir and the checkpoint
-    steps of both stages: a stage with a newer (or other) step is reloaded, an unchanged workdir is not."""
-
-    def __init__(self, maxsize: int = 4):
-        super().__init__(load_model, _checkpoint_steps, maxsize)
+load_model = load  # the name the CLI and older callers use
 
 
-def _checkpoint_steps(workdir) -> tuple:
-    """The checkpoint step folders of both stages (cheap: a directory listing)."""
-    out = []
-    for sub in (W.AE_SUBDIR, W.TRANSFORMER_SUBDIR):
-        d = pathlib.Path(workdir) / sub
-        out.append(tuple(sorted(int(p.name) for p in d.iterdir() if p.name.isdigit())) if d.is_dir() else ())
-    return tuple(out)
-
-
-def transfer(content: Motion, style: Motion, *, workdir, method: str = "soft") -> Motion:
-    """Style transfer of two Motions with the model of ``workdir`` (SPEC §7); see :class:`TGSTModel`."""
+def transfer(content, style, *, workdir, method: str = "soft") -> Motion:
+    """Style transfer of two Motions (or BVH paths) with the model of ``workdir`` (docs/design.md §7), loaded now;
+    see :class:`TGSTModel`."""
     _check_method(method)
-    return load_model(workdir).transfer(content, style, method=method)
+    return load(workdir).transfer(content, style, method=method)
 
 
-__all__ = ["METHODS", "ModelCache", "TGSTModel", "compiled_transfer", "content_floor_contact", "count_params",
-           "foot_names", "load_model", "resample_body", "transfer"]
+__all__ = ["METHODS", "TGSTModel", "compiled_transfer", "content_floor_contact", "count_params",
+           "foot_names", "load", "load_model", "resample_body", "transfer"]

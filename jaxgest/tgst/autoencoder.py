@@ -15,7 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgest.motion import body, kinematics, rotations
+from jaxgest.motion.rotations import angular_error_rad  # noqa: F401 (re-exported; moved below baselines)
 from jaxgest.nn import gelu_exact, safe_norm
+from jaxgest.tgst import baselines
 from jaxgest.tgst.config import POSITION_VELOCITY_JOINTS, AutoencoderConfig
 
 
@@ -227,8 +229,6 @@ def init_linear_path(params: dict, config: AutoencoderConfig, uppers, lowers, *,
     statistics in ``params`` are used to express the maps in standardised units (set them first).
     Not in the paper: the starting point of ``AutoencoderConfig.linear_path``.
     """
-    from jaxgest.tgst import baselines
-
     if not config.linear_path:
         raise ValueError("init_linear_path needs AutoencoderConfig.linear_path=True")
     r, d, c = config.time_reduction, config.latent_dim, config.linear_context
@@ -285,7 +285,7 @@ def expmap_reconstruction_loss(pred: jax.Array, target: jax.Array) -> jax.Array:
     """Mean over frames and joints of the per-joint exp-map difference norm ``||r_hat - r||_2``.
 
     pred, target: ``(batch, frames, 3J)``. Returns ``(batch,)``. The paper (§3.5) speaks of "the mean
-    square of ... angular differences"; SPEC.md §3 follows the authors' code, which averages the plain
+    square of ... angular differences"; docs/design.md §3 follows the authors' code, which averages the plain
     (unsquared) L2 norm of exp-map differences, as done here.
     References: Kuriyama et al. 2022, §3.5 (authors' code ``AutoEncoder.loss_function``).
     """
@@ -317,16 +317,6 @@ def upper_joint_channels(joints) -> np.ndarray:
 def trunk_channels() -> np.ndarray:
     """Exp-map channels of :data:`TRUNK_JOINTS` in the upper-body layout."""
     return upper_joint_channels(TRUNK_JOINTS)
-
-
-def angular_error_rad(pred: jax.Array, target: jax.Array) -> jax.Array:
-    """Geodesic angle between the rotations of two exp-map arrays ``(..., 3J) -> (..., J)`` in [0, pi]."""
-    chex.assert_equal_shape([pred, target])
-    shape = pred.shape[:-1] + (pred.shape[-1] // 3, 3)
-    qp = rotations.expmap_to_quat(jnp.reshape(pred, shape))
-    qt = rotations.expmap_to_quat(jnp.reshape(target, shape))
-    qt_conj = jnp.concatenate([qt[..., :1], -qt[..., 1:]], axis=-1)  # inverse of a unit quaternion
-    return rotations.quat_angle(rotations.quat_mul(qt_conj, qp))
 
 
 def mean_angular_error_deg(pred: jax.Array, target: jax.Array) -> jax.Array:

@@ -19,6 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgest.motion import rotations
+from jaxgest.motion.rotations import angular_error_rad
 from jaxgest.tgst.swap import hard_swap  # noqa: F401  (eq. 19 baseline, same API as the soft swap)
 from jaxgest.tgst.tokens import detokenize, tokenize
 
@@ -125,8 +127,6 @@ def mean_pose_fit(clips) -> np.ndarray:
     sign-free), returned as an exp-map. (The channel mean of exp-maps would be wrong for joints near a
     rotation of pi, where the exp-map jumps to the antipode: the rig's arm and leg frames sit there.)
     """
-    from jaxgest.motion import rotations
-
     x = np.concatenate([np.asarray(c, np.float64) for c in clips], axis=0)
     q = np.asarray(rotations.expmap_to_quat(x.reshape(len(x), -1, 3)))  # (N, J, 4)
     mean = []
@@ -138,7 +138,5 @@ def mean_pose_fit(clips) -> np.ndarray:
 
 def per_joint_angle_deg(pred, target) -> np.ndarray:
     """Mean geodesic angle in degrees per joint between exp-map arrays ``(F, 3J)`` -> ``(J,)``."""
-    from jaxgest.tgst.autoencoder import angular_error_rad
-
     pred = np.broadcast_to(np.asarray(pred, np.float32), np.shape(target))
     return np.degrees(np.asarray(angular_error_rad(jnp.asarray(pred), jnp.asarray(target, jnp.float32)))).mean(0)

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import jax
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.tgst import model as tgst_model
 from jaxgest.tgst.config import InferenceConfig
 

@@ -1,78 +1,46 @@
 """Configuration of tokenized gesture style transfer (Kuriyama et al. 2022): model, training, inference.
 
-A preset (:class:`Config`, ``preset(name)``) is three separate frozen dataclasses:
+A preset (:class:`Config`, ``PRESETS[name]`` / :func:`preset`) is three frozen dataclasses:
 
-* :class:`ModelConfig` -- what the trained networks *are*: the autoencoder and transformer sizes
+* :class:`ModelConfig` -- what the trained networks are: the autoencoder and transformer sizes
   (:class:`AutoencoderConfig`, :class:`TransformerConfig`), the model frame rate, token width/stride, clip
   padding (``edge_frames``) and the soft swap (similarity and temperature). Checkpoints store and check only
-  this (the autoencoder checkpoint :meth:`ModelConfig.autoencoder_dict`, the transformer checkpoint all of it
-  plus the autoencoder step it was trained on), so changing a training or inference setting never blocks a
-  resume or a transfer.
-* :class:`TrainConfig` -- how each stage is trained: :class:`AutoencoderTrainConfig` (optimiser, schedule,
-  batch, window, sampling, mirroring) and :class:`TransformerTrainConfig` (optimiser, batch, window, the loss
-  weights and switches of eq. 12).
-* :class:`InferenceConfig` -- settings used only when transferring (the default method, the length buckets
-  of batched evaluation).
+  this (:meth:`ModelConfig.autoencoder_dict` for the autoencoder, all of it for the transformer), so a
+  training or inference setting never blocks a resume or a transfer.
+* :class:`TrainConfig` -- how each stage is trained, step counts included: :class:`AutoencoderTrainConfig`
+  and :class:`TransformerTrainConfig` (optimiser, schedule, batch, window, sampling, the loss weights and
+  switches of eq. 12).
+* :class:`InferenceConfig` -- settings used only when transferring.
 
-The swap temperature is a model setting, not an inference one: the paper's eq. 4 has none (temperature 1)
-and the same soft swap is used inside the training losses (identity and cyclic terms, eqs. 5-8), so the
-transformer is fitted to one temperature; changing it changes the trained function.
+The swap temperature is a model setting: the same soft swap is used inside the training losses (eqs. 5-8),
+so the transformer is fitted to one temperature.
 
-Presets (``preset(name)``):
+Presets (:data:`PRESETS`); change any field with a dotted override
+(:func:`jaxgest.runtime.config.apply_overrides`, ``--override train.autoencoder.learning_rate=3e-4``):
 
-* ``"paper"`` -- the published sizes (App. A, §3.3-3.5): autoencoder 23,743 parameters, transformer 50,240
-  (one LayerNorm per block shared by both residuals, as in the authors' code; ``layernorms_per_block=2``
-  gives 50,496). AE: Adam 1e-4, batch 32, 256-frame windows; transformer: Adam 1e-4, batch 8, 1280-frame
-  windows. Default ``variant="paper"``: pre-LN ("layer normalization as a preprocessing step", §3.4),
-  band mask |i - j| <= omega, sinusoidal positions over the token index; clips replicate-padded by 16
-  frames at both ends (SPEC §3).
-  Command: ``jaxgest tgst train --data DIR --workdir W --preset paper``; the paper trains 1000 epochs
-  (hours on a CPU); expect an AE mean angular error of a few degrees on Bandai-Namco.
-* ``"fit"`` -- the paper's sizes (same parameter counts, plus 126 frozen normalisation numbers) with a
-  recipe for real data: the autoencoder standardises its channels with the training data's statistics,
-  trains at Adam 1e-3 with a warm-up and cosine decay (6,000 steps) on content-balanced windows (each
-  content label equally often); the transformer's tokens carry no positions (``token_positions="none"``,
-  as in the authors' code) so the soft swap matches tokens by content, not by index.
-  Command: ``jaxgest tgst train --data DIR --workdir W --preset fit``. See experiments/tgst_bandai.
-* ``"fit-pca"`` -- ``fit`` plus a block-linear path beside the conv stacks (``linear_path``, not in the
-  paper: +6,796 parameters), initialised to the block PCA of the training clips, so the autoencoder starts
-  at the PCA-16 reconstruction and the convs learn the non-linear remainder. On Bandai-Namco the paper's
-  conv autoencoder alone stays far above PCA-16 (experiments/tgst_bandai, section 2).
-  Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-pca``.
-* ``"fit-smooth"`` -- ``fit`` plus a lapped linear path (``linear_context=1``, not in the paper: each decoder
-  maps latent frames t-1 .. t+1 to output block t, the linear encoder reads one block on each side; +19,852
-  parameters), started at a linear autoencoder in closed form (block PCA encoder, least-squares decoders
-  with the frame-to-frame differences weighted by ``init_velocity_weight=64``), trained at Adam 3e-4 with
-  a velocity term in the loss (``velocity_weight=10``). Removes ``fit-pca``'s jumps at the 4-frame block
-  boundaries: held-out angle below PCA-16 and half the round-trip speed excess (experiments/tgst_bandai,
-  section 2c). Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-smooth --ae-steps 500``.
-* ``"fit-motion"`` -- ``fit-smooth`` trained for motion quality as well as pose (none of it in the paper):
-  the lower body's training targets on the exp-map branch nearest the rest pose (``expmap_branch="rest"``,
-  :func:`jaxgest.motion.body.nearest_branch`: the rig's upper legs rest at pi), the trunk joints weighted 4x
-  (``trunk_weight``) and the joint-displacement term at 0.15 (``position_velocity_weight``), 500 steps on a
-  cosine schedule of 500. On Bandai-Namco, six seeds: held-out angle 6.69-7.08 deg (every seed below PCA-16's
-  7.44), arm speed 1.04-1.08x of the input, no lower-body joint-frame off by more than 90 deg
-  (experiments/tgst_bandai, section 2f). Command: ``jaxgest tgst train --data DIR --workdir W --preset fit-motion``.
-* ``"tiny"`` -- the paper's model (the same :class:`ModelConfig`: the widths are already tiny) with short
-  windows and small batches (AE window 64, batch 4; transformer window 128, batch 4) and Adam 1e-3 so tests
-  and ``jaxgest demo --quick`` train in seconds to a minute on a CPU; the lower body's training targets on
-  the exp-map branch nearest the rest pose (``expmap_branch="rest"``: the synthetic rig's upper legs rest at
-  pi like Bandai-Namco's and flip branch in up to 30 % of a clip's frames). Not the paper's training setup.
+* ``"paper"`` -- the published sizes and training setup (App. A, §3.3-3.5): autoencoder 23,743 parameters,
+  transformer 50,240; pre-LN, band mask, sinusoidal token positions; clips replicate-padded by 16 frames at
+  both ends (docs/design.md §3); 10,000 + 10,000 steps.
+* ``"fit-motion"`` -- the recommended preset for real data: the paper's networks plus, none of it in the
+  paper, standardised autoencoder channels, a lapped linear path started in closed form, content-balanced
+  windows, tokens without positions, and a loss for motion quality (frame-to-frame and joint-displacement
+  terms, trunk weight, leg targets on the branch nearest the rest pose); 500 + 10,000 steps. Each value was
+  chosen in experiments/tgst_bandai (sections 2, 2c, 2f).
+* ``"tiny"`` -- the paper's networks with short windows, small batches and Adam 1e-3, so tests and
+  ``jaxgest demo --quick`` train in seconds; 200 + 200 steps. Not the paper's training setup.
 
-Training windows are scaled to the data (:func:`jaxgest.tgst.data.fit_windows`): each window is
-``min(preset window, median clip length at cfg.model.fps rounded down to a multiple of 16)``, so the
-Bandai-Namco clips (30 fps, mostly 4-15 s, resampled to 60 fps) train with the ``paper`` preset; the
-windows actually used are stored in the workdir's config.json.
-
-Every config is a frozen (hashable, usable as a jit static argument) dataclass of JSON-friendly fields:
-``cfg.to_dict()`` is stored in config.json and :meth:`Config.from_dict` rebuilds it -- also from the flat
-config of workdirs written before this split (:func:`legacy_to_dict`), so they still load for transfer.
+Training windows are scaled to the data (:func:`jaxgest.tgst.data.fit_windows`); the windows used are
+stored in the workdir's config.json. Every config is a frozen (hashable, a valid jit static argument)
+dataclass of JSON-friendly fields: ``cfg.to_dict()`` is stored in config.json and :meth:`Config.from_dict`
+rebuilds it -- also from the flat config of older workdirs (:func:`legacy_to_dict`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from typing import Any, Mapping
+
+from jaxgest.runtime.config import get_preset
 
 VARIANTS = ("paper", "authors")
 ATTENTION_IMPLS = ("blockwise", "dense")
@@ -83,7 +51,6 @@ AE_SAMPLINGS = ("windows", "content")
 POSITION_VELOCITY_JOINTS = ("all", "upper")  # joints of the optional joint-displacement term
 EXPMAP_BRANCHES = ("principal", "rest")  # branch of the training targets' exp-maps (body.nearest_branch)
 TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
-PRESETS = ("tiny", "paper", "fit", "fit-pca", "fit-smooth", "fit-motion")  # names accepted by preset()
 METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
 
 
@@ -112,8 +79,8 @@ class AutoencoderConfig:
     # ``AutoencoderTrainConfig.pca_init``) with the conv stacks' last layers zeroed, so training starts at
     # the PCA reconstruction and the convs learn the non-linear remainder
     linear_path: bool = False
-    # latent frames on each side the linear path also uses (not in the paper): 0 = non-overlapping blocks
-    # (``fit-pca``); c > 0 = lapped: the linear encoder reads c blocks on each side too and each decoder maps
+    # latent frames on each side the linear path also uses (not in the paper): 0 = non-overlapping blocks;
+    # c > 0 = lapped: the linear encoder reads c blocks on each side too and each decoder maps
     # latent frames t - c .. t + c to block t, initialised by least squares (autoencoder.init_linear_path)
     linear_context: int = 0
 
@@ -159,7 +126,7 @@ class ModelConfig:
     min_frames: int = 16  # shortest clip accepted (one token = w * 4 = 16 frames)
     frame_multiple: int = 16  # clips are padded at the end to a multiple of this many frames
     # replicate-pad every clip by this many frames at BOTH ends before encoding and trim after decoding
-    # (SPEC §3, clip ends); a multiple of the encoder's total stride. 0 = the end-only padding of old runs
+    # (docs/design.md §3, clip ends); a multiple of the encoder's total stride. 0 = the end-only padding of old runs
     edge_frames: int = 0
     swap_temperature: float = 1.0  # softmax temperature of the soft swap (1 = eq. 4; also used in training)
     # similarity of the swap: "dot" = plain dot product (eq. 4 as printed); "scaled" = both sides
@@ -212,6 +179,7 @@ AUTOENCODER_FIELDS = ("fps", "autoencoder", "min_frames", "frame_multiple", "edg
 class AutoencoderTrainConfig:
     """Training of stage 1, the motion autoencoder (§3.5)."""
 
+    steps: int = 10_000  # training steps (about the paper's 1000 epochs of its AE data in batches of 32)
     learning_rate: float = 1e-4  # Adam learning rate (§3.5)
     batch_size: int = 32  # windows per batch (§3.5)
     window: int = 256  # training window in frames (§3.5)
@@ -257,6 +225,7 @@ class AutoencoderTrainConfig:
 class TransformerTrainConfig:
     """Training of stage 2, the style transformer with the autoencoder frozen (§3.5, eq. 12)."""
 
+    steps: int = 10_000  # training steps (about the paper's 1000 epochs of its 63 pairs in batches of 8)
     learning_rate: float = 1e-4  # Adam learning rate (§3.5)
     batch_size: int = 8  # content/style pairs per batch (§3.5)
     window: int = 1280  # frames per content training window (§3.5; and per style window with "window")
@@ -386,46 +355,45 @@ def legacy_to_dict(flat: Mapping[str, Any]) -> dict:
     return out
 
 
+def _tiny() -> Config:
+    return Config(
+        name="tiny",
+        model=ModelConfig(edge_frames=16),
+        train=TrainConfig(
+            autoencoder=AutoencoderTrainConfig(steps=200, learning_rate=1e-3, batch_size=4, window=64,
+                                               expmap_branch="rest"),
+            transformer=TransformerTrainConfig(steps=200, learning_rate=1e-3, batch_size=4, window=128)),
+    )
+
+
+def _fit_motion() -> Config:
+    """The recommended real-data preset; the experiment that chose each value in experiments/tgst_bandai."""
+    return Config(
+        name="fit-motion",
+        model=ModelConfig(
+            edge_frames=16,
+            transformer=TransformerConfig(token_positions="none"),  # section 4
+            autoencoder=AutoencoderConfig(standardize=True,  # section 2
+                                          linear_path=True,  # section 2b
+                                          linear_context=1)),  # section 2c
+        train=TrainConfig(autoencoder=AutoencoderTrainConfig(
+            steps=500, lr_decay_steps=500,  # section 2f
+            learning_rate=3e-4, init_velocity_weight=64.0, velocity_weight=10.0,  # section 2c
+            lr_schedule="cosine", sampling="content",  # section 2
+            position_velocity_weight=0.15,  # section 2d
+            trunk_weight=4.0,  # section 2e
+            expmap_branch="rest")),  # section 2f
+    )
+
+
+#: every preset by name: the published setup, the recommended real-data preset, the fast one for tests
+PRESETS: dict[str, Config] = {
+    "paper": Config(name="paper", model=ModelConfig(edge_frames=16)),
+    "fit-motion": _fit_motion(),
+    "tiny": _tiny(),
+}
+
+
 def preset(name: str = "paper") -> Config:
-    """Named preset: ``"paper"`` (published sizes and training setup), ``"fit"`` (the paper's sizes with an
-    autoencoder recipe for real data), ``"fit-pca"`` (``fit`` with the PCA-initialised linear path),
-    ``"fit-smooth"`` (``fit`` with the lapped linear path and the velocity term), ``"fit-motion"`` (``fit-smooth``
-    with continuous leg targets, a trunk weight and the displacement term) or ``"tiny"`` (fast tests/demo)."""
-    if name == "paper":
-        return Config(name="paper", model=ModelConfig(edge_frames=16))
-    if name == "tiny":
-        return Config(
-            name="tiny",
-            model=ModelConfig(edge_frames=16),
-            train=TrainConfig(
-                autoencoder=AutoencoderTrainConfig(learning_rate=1e-3, batch_size=4, window=64,
-                                                   expmap_branch="rest"),
-                transformer=TransformerTrainConfig(learning_rate=1e-3, batch_size=4, window=128)),
-        )
-    if name == "fit":
-        return Config(
-            name="fit",
-            model=ModelConfig(edge_frames=16, transformer=TransformerConfig(token_positions="none"),
-                              autoencoder=AutoencoderConfig(standardize=True)),
-            train=TrainConfig(autoencoder=AutoencoderTrainConfig(
-                learning_rate=1e-3, lr_schedule="cosine", lr_decay_steps=6000, sampling="content")),
-        )
-    if name == "fit-pca":
-        fit = preset("fit")
-        ae = dataclasses.replace(fit.model.autoencoder, linear_path=True)
-        return dataclasses.replace(fit, name="fit-pca", model=dataclasses.replace(fit.model, autoencoder=ae))
-    if name == "fit-smooth":
-        fit = preset("fit")
-        ae = dataclasses.replace(fit.model.autoencoder, linear_path=True, linear_context=1)
-        ae_train = dataclasses.replace(fit.train.autoencoder, learning_rate=3e-4, init_velocity_weight=64.0,
-                                       velocity_weight=10.0)
-        return dataclasses.replace(fit, name="fit-smooth", model=dataclasses.replace(fit.model, autoencoder=ae),
-                                   train=dataclasses.replace(fit.train, autoencoder=ae_train))
-    if name == "fit-motion":
-        fs = preset("fit-smooth")
-        ae_train = dataclasses.replace(fs.train.autoencoder, expmap_branch="rest", trunk_weight=4.0,
-                                       position_velocity_weight=0.15, lr_decay_steps=500)
-        return dataclasses.replace(fs, name="fit-motion", train=dataclasses.replace(fs.train, autoencoder=ae_train))
-    raise ValueError(f"unknown TGST preset {name!r} (expected one of {', '.join(PRESETS)})")
-
-
+    """The preset ``name`` of :data:`PRESETS` (an unknown name: a one-line error listing them)."""
+    return get_preset(PRESETS, name, "TGST")

@@ -32,7 +32,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import body, datasets, kinematics
 from jaxgest.motion import rotations as R
 from jaxgest.motion.skeleton import Motion

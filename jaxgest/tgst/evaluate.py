@@ -1,10 +1,10 @@
-"""Quantitative evaluation of TGST style transfer (paper 000 §4.2-4.3, Tables 1-3; SPEC §5).
+"""Quantitative evaluation of TGST style transfer (paper 000 §4.2-4.3, Tables 1-3; docs/design.md §5).
 
 * :class:`Protocol` / :data:`PROTOCOLS` -- how clips become metric features: ``authors`` (default, the
   paper tables) or ``world`` (ground-truth checks; the protocol of earlier runs).
 * :func:`clip_features` / :func:`clip_errors` -- content error (eqs. 13-14, both hands, exact DTW) and style
   error (eqs. 15-16, arm-joint velocities) of one transferred clip, plus the same two errors against the
-  ground-truth clip (the content performed in the target style) where the dataset has one (SPEC §5).
+  ground-truth clip (the content performed in the target style) where the dataset has one (docs/design.md §5).
 * :func:`make_pairs` -- content/style evaluation pairs: intra-scenario, inter-scenario or all.
 * :func:`evaluate` -- per-method averages over pairs of mean / worst / w25 (Tables 2 and 3), the controls
   "content as is" and "style as is", and swap diagnostics. Transfers run in-process, bucketed by clip
@@ -32,7 +32,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.tgst import model as tgst_model
 from jaxgest.tgst.batched import (DEFAULT_BUCKET, BatchedTransfer, bucket_length,  # noqa: F401  (re-exported)
                                   swap_diagnostics)

@@ -65,7 +65,7 @@ def cyclic_loss(cyclic_tokens: jax.Array, content_tokens: jax.Array) -> jax.Arra
 def structure_matrix(keys: jax.Array) -> jax.Array:
     """m(g): cosine self-similarity of encoder keys, ``(batch, N, d) -> (batch, N, N)``.
 
-    ``keys`` are the gesture-token keys k_i = m_k g_i of the encoder (CLS excluded, as in SPEC.md; the
+    ``keys`` are the gesture-token keys k_i = m_k g_i of the encoder (CLS excluded, as in docs/design.md; the
     authors' code computes the matrix with CLS and then drops its row and column, which is the same).
     References: Kuriyama et al. 2022, eq. 9.
     """

@@ -74,7 +74,7 @@ def edge_layout(frames: int, *, cfg: ModelConfig) -> tuple[int, int]:
 
 
 def pad_clip(x: jax.Array, *, cfg: ModelConfig) -> jax.Array:
-    """Clip ends (SPEC §3): replicate-pad ``(batch, F, ch)`` at both ends (see :func:`edge_layout`).
+    """Clip ends (docs/design.md §3): replicate-pad ``(batch, F, ch)`` at both ends (see :func:`edge_layout`).
 
     The one place where every encode path (autoencoder training windows, transformer training, transfers,
     round trips, diagnostics) pads a clip, so the encoder's zero padding only ever meets copies of the edge

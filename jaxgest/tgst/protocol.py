@@ -1,4 +1,4 @@
-"""TGST metric protocols (paper 000 §4.2; SPEC §5): how a clip becomes the features of the content and style
+"""TGST metric protocols (paper 000 §4.2; docs/design.md §5): how a clip becomes the features of the content and style
 errors, and the per-clip errors themselves.
 
 * :class:`Protocol` / :data:`PROTOCOLS` / :func:`get_protocol` -- ``authors`` (default, the paper tables) or
@@ -7,7 +7,7 @@ errors, and the per-clip errors themselves.
   hands, exact DTW) and style error (eqs. 15-16, arm-joint velocities) of one transferred clip, plus the same
   two errors against the ground-truth clip where the dataset has one.
 
-The ``authors`` protocol (the authors' evaluator.py and dataset/mocap.py; SPEC §5):
+The ``authors`` protocol (the authors' evaluator.py and dataset/mocap.py; docs/design.md §5):
 
 * positions by forward kinematics with the root (the hips) at the origin and its rotation reset
   (:func:`jaxgest.motion.kinematics.root_local_positions`, ``get_joint_positions(root_positions=None)``);
@@ -47,7 +47,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import body, kinematics
 from jaxgest.motion.skeleton import Motion
 
@@ -163,7 +163,7 @@ def clip_features(motion: Motion, fps: float | None = None, protocol="authors",
     Under the authors' protocol F' = F - 2 cut and F'' = F' - 1; under ``world`` F' = F'' = F.
     Raises DataError (naming the clip) when it is too short for the cut.
     References: Kuriyama et al. 2022, §4.2 (6-D hand positions in metres; velocities of arm joints); the
-    authors' evaluator.py; SPEC §5.
+    authors' evaluator.py; docs/design.md §5.
     """
     p = get_protocol(protocol)
     if fps is not None and abs(float(fps) - motion.fps) > 1e-9:
@@ -217,7 +217,7 @@ def clip_errors(result: Motion, content: Motion, style: Motion, ground_truth: Mo
     ``ground_truth`` is given. All clips are compared at the result's frame rate. Raises DataError when a
     clip is too short for the protocol's cut or one style window.
 
-    References: Kuriyama et al. 2022, eqs. 13-16 and §4.3 (imitated ground truth); SPEC §5.
+    References: Kuriyama et al. 2022, eqs. 13-16 and §4.3 (imitated ground truth); docs/design.md §5.
     """
     p = get_protocol(protocol)
     fps = result.fps

@@ -3,7 +3,7 @@
 Both builders take the whole preset (:class:`~jaxgest.tgst.config.Config`: the model and the stage's
 training settings) and return ``step(state, batch, key) -> (state, metrics)`` to be wrapped with
 ``jax.jit(step, donate_argnums=(0,))``. ``state`` is a ``flax.training.train_state.TrainState`` (re-exported
-by ``jaxgest.training``) holding only the parameters being trained; the optimizer update uses the ``tx``
+by ``jaxgest.runtime.training``) holding only the parameters being trained; the optimizer update uses the ``tx``
 given to the builder (it must be the state's ``tx``). Neither model uses dropout (§3.5: "no dropout"), so
 the steps are deterministic and ``key`` is accepted for the common step signature only.
 
@@ -32,7 +32,7 @@ from jaxgest.tgst.config import Config
 from jaxgest.tgst.losses import ae_loss_terms, transformer_loss_terms  # noqa: F401  (ae_loss_terms re-exported)
 from jaxgest.tgst.model import Params, autoencoder_module, encode_pair, transformer_module
 from jaxgest.tgst.tokens import tokenize
-from jaxgest.training import make_update_step
+from jaxgest.runtime.training import make_update_step
 
 Step = Callable[[TrainState, dict, jax.Array], tuple[TrainState, dict]]
 

@@ -15,7 +15,7 @@ import chex
 import jax
 import jax.numpy as jnp
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 
 class ClipTooShortError(DataError, ValueError):

@@ -1,6 +1,6 @@
 """A TGST workdir on disk: its config.json, the checkpoint folders of both stages, restoring a model.
 
-Layout (written by :func:`jaxgest.tgst.train.train`)::
+Layout (written by :func:`jaxgest.tgst.trainer.train`)::
 
     config.json                      {"model": "tgst", "preset", "config": Config.to_dict(), "data", ...}
     metrics.jsonl                    one line per log step: {"stage", "step", "loss", ..., "devices", ...}
@@ -14,7 +14,7 @@ settings can change between runs of one workdir. Workdirs written before the mod
 (a flat config in config.json and in the checkpoints' meta; ``"kind": "tgst"``) are read through
 :func:`jaxgest.tgst.config.legacy_to_dict`, so they still load for transfer.
 
-Imported by both training (:mod:`jaxgest.tgst.train`) and inference (:mod:`jaxgest.tgst.api`).
+Imported by both training (:mod:`jaxgest.tgst.trainer`) and inference (:mod:`jaxgest.tgst.api`).
 """
 
 from __future__ import annotations
@@ -24,9 +24,9 @@ from typing import Mapping, Optional, Union
 
 import jax
 
-from jaxgest.checkpoint import Checkpointer
-from jaxgest.workdir_format import check_workdir_config
-from jaxgest.errors import CheckpointError
+from jaxgest.runtime.checkpoint import Checkpointer
+from jaxgest.runtime.workdir_format import check_workdir_config
+from jaxgest.runtime.errors import CheckpointError
 from jaxgest.tgst import data as tdata
 from jaxgest.tgst.config import Config, ModelConfig, legacy_to_dict, model_config_from_dict
 

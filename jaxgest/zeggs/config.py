@@ -1,83 +1,38 @@
 """Configuration of ZeroEGGS (Ghorbani et al. 2023): network sizes, loss weights, training settings.
 
-Presets (``preset(name)``; each is a :class:`Config` of three parts):
-
-* ``"paper"`` -- the published sizes (§4.2-4.3) on the paper's 75-joint skeleton (pose vector 15j+6 =
-  1131): speech encoder Conv1d 64 (k3) -> Conv1d 64 (k31), ELU, dropout 0.2, framewise linear, D_S = 64;
-  style encoder Conv1d k3 512 -> ReLU -> LN -> dropout 0.2 -> Conv1d k3 2 D_e -> ReLU -> LN -> dropout,
-  sinusoidal positions, one FFT block (4 heads, dropout 0.1, two Conv1d k3), mean over time, D_e = 64;
-  generator: hidden-state initializer (3 linear layers of 1024, ELU) and two GRU layers of 1024. RAdam
-  1e-4, decay 0.995 every 1k steps, batch 32, T = 256, style window 256-512. About 25.5 M parameters
-  (``jaxgest.zeggs.api.count_params("paper")``). Command: ``jaxgest zeggs train --data DIR --workdir W
-  --preset paper``; the authors train 120k steps on a GPU (days on a CPU).
-* ``"tiny"`` -- the same architecture with tiny widths (convs 16, GRU 32, D_S = D_e = 8), short windows,
-  a 5-joint pose and Adam-like RAdam at 1e-3, so tests and ``jaxgest demo --quick`` run in seconds. It
-  compiles with XLA's backend optimisation level 0 (``xla_opt_level=0``: the train step compiles ~2.5x
-  faster, runs ~3x slower, which pays off below a few thousand steps); override it with
-  ``xla_opt_level=None`` (``--override xla_opt_level=none``) for long runs of a widened tiny model.
-* ``"small"`` -- the mid-size model of ``experiments/zeggs_synthetic``: speech convs 32/32 (kernels 3, 63:
-  65 frames, ~1.1 s of speech at 60 fps, the paper's "roughly 1 second"; with kernels 3, 15 the generator
-  could not anticipate gestures that start up to ~0.9 s before their speech onset and its rollout was
-  over-damped), D_S = 16; style encoder conv 64, D_e = 64 (the paper's; at 8k steps it beats D_e = 16 on
-  the Fréchet distance and the held-out leakage contrast; its style probe varies with the seed), 2 heads; GRU 2 x 128, initializer 128; batch 16, training
-  window T = 128 frames (the paper's code: 256; with T = 64 the rollout stayed over-damped: Fréchet distance
-  7-14x the real-vs-real floor at 2,400 steps against ~1x with T = 128, two seeds each), style windows
-  64-128 frames; RAdam 1e-3 (x0.995 every 100 steps); KL weight logistic (centre 1000
-  steps, growth 0.005, cap 0.2, the authors'; caps 0.02 (3 seeds) and 1.0 (1 seed) measured in
-  ``experiments/zeggs_synthetic``: neither raises the style probe); a fifth of the training rows start the
-  generator from the mean pose (``initial_pose_shuffle=0.2``, ``initial_pose_source="mean"``: not the paper,
-  see "Initial pose" below); XLA's default optimisation. 8k steps take ~20 min on 2 idle CPU cores.
-
-Where the paper's text and the authors' public code differ (kept as in the code unless stated):
-the first speech conv has kernel 3 in the paper (1 in the code; we follow the paper and SPEC); the
-style encoder's second conv outputs 2 D_e channels and the FFT block runs at that width (the code; the
-paper's "64 channels" for the FFT convs is D_e, the code's projection to 2 D_e *is* that second conv),
-so ``style_projection=False`` in the paper preset adds no extra layer.
-
-Style sampling (``style_sampling``; SPEC §4): the paper draws the training style window so that it
-*contains* the target window (``"overlap"``), which lets the style embedding describe the target's own
-gestures (content) instead of the style. SPEC §4 allows a window apart from the target if it is measured
-against the paper's; the default ``"disjoint"`` takes it from the same clip but not overlapping the target
-(``"other-clip"``: another clip with the same style label, in the target's variant: mirrored or not, same
-speed, since a mirror swaps the dominant hand). The three were compared on identical data and
-steps with ``jaxgest zeggs evaluate``'s leakage report and probes (``experiments/zeggs_synthetic``, 1,200
-steps of the ``small`` preset): ``"disjoint"`` is the one where a same-style example of other content
-reconstructs better than another style's (z 4.5) and than e = 0, and the style probe clears its
-random-init control; with ``"overlap"`` the target's own window dominates.
-
-Initial pose (``initial_pose_shuffle``, ``initial_pose_source``; the paper: 0, every row starts from its own
-first pose): training starts the generator from the target's own first pose, and inference from the style
-example's, so part of the style reaches the generator through that pose rather than the embedding
-(``experiments/zeggs_synthetic/static_style.py``: about half). A probability above 0 starts that share of the
-rows from another row's first pose; at 0.5 the embedding carries the style (its probe rises, the leakage
-contrasts grow) but the held-out beat alignment is lost (three seeds); at 0.2 too (three seeds: held-out
-BeatAlign above its control at z >= 2 in one). Two further options isolate where that cost comes from
-(``initial_pose_mask_seconds``: the first seconds of a shuffled row are left out of its loss;
-``initial_pose_source="mean"``: a shuffled row starts from the data's mean pose instead of another style's).
-The mask on three seeds does not keep the beat alignment. **The mean-pose source at 0.2 is the ``small``
-preset's default** (not the paper's; SPEC leaves the training-time initial pose open): over five seeds,
-under a rule written before seeds 3 and 4 ran, it keeps the held-out beat alignment (z 3.1-5.1) and the
-held-out leakage contrast (z 4.4-5.3; the paper's 0: 2.2-3.7) in every seed, and raises the pooled style
-probe by +0.067 +- 0.026 paired over seeds (0.910-0.923 in every seed against 0.765-0.912). The ``paper``
-and ``tiny`` presets keep the paper's 0 (``--override initial_pose_shuffle=0`` gives it back on ``small``).
-
-The three parts:
+A preset (:class:`Config`, ``PRESETS[name]`` / :func:`preset`) has three parts:
 
 * :class:`ModelConfig` -- what rebuilds the network and interprets its inputs and outputs: layer sizes,
-  the rig (joints, FK parents/offsets), frame rate, speech features (loudness normalisation) and pose input
-  normalisation. A checkpoint carries only this part (and the data signature: skeleton, pose statistics
-  shape); a resumed run must request the same one.
+  the rig (joints, FK parents/offsets; set from the data), frame rate, speech features (loudness
+  normalisation: it changes the features the network was trained on) and pose input normalisation. A
+  checkpoint carries only this part; a resumed run must request the same one.
 * :class:`TrainConfig` -- losses and their weights, KL schedule, optimiser, batch, windows, style sampling,
-  augmentation, steps and XLA compiler options. Changing any of it never blocks resuming.
+  initial-pose options, augmentation, steps and XLA compiler options. Changing any of it never blocks resuming.
 * :class:`InferenceConfig` -- sampling temperature, the shortest style example, compiler options.
 
-Loudness normalisation is in the model part, not the inference part: it changes the speech features the
-network was trained on (a model trained without it must be run without it, see :data:`LEGACY_DEFAULTS`).
+Presets (:data:`PRESETS`); change any field with a dotted override
+(:func:`jaxgest.runtime.config.apply_overrides`, ``--override model.gru_hidden=128``):
+
+* ``"paper"`` -- the published sizes and training setup (§4.2-4.3) on the paper's 75-joint skeleton (pose
+  vector 15j+6 = 1131); about 25.5 M parameters; 120,000 steps.
+* ``"small"`` -- the mid-size model of experiments/zeggs_synthetic, which chose its values: speech kernels
+  3, 63 (about 1 s of speech), D_e = 64, training window 128 frames, KL schedule, and a fifth of the training
+  rows started from the mean pose (``initial_pose_shuffle=0.2``, ``initial_pose_source="mean"``; not the
+  paper's); 8,000 steps.
+* ``"tiny"`` -- the same architecture with tiny widths and short windows, compiled at XLA optimisation level
+  0 (``xla_opt_level``), so tests and ``jaxgest demo --quick`` run in seconds; 300 steps.
+
+Where the paper's text and the authors' public code differ (kept as in the code unless stated): the first
+speech conv has kernel 3 (the paper; the code has 1); the style encoder's second conv outputs 2 D_e channels
+and the FFT block runs at that width (the code), so ``style_projection=False`` adds no extra layer.
+
+Style sampling (``style_sampling``, docs/design.md §4): ``"overlap"`` (the paper: the style window contains
+the target window), ``"disjoint"`` (the default: the same clip, apart from the target) or ``"other-clip"``
+(another clip of the same style label, in the target's variant); chosen in experiments/zeggs_synthetic.
 
 Every part is a frozen (hashable, jit-static) dataclass of JSON-friendly fields. ``Config.to_dict()`` is
-written to ``config.json`` (``{"name", "model", "train", "inference"}``) and :meth:`Config.from_dict` reads
-it back, including the flat dict of one ``ZeggsConfig`` that earlier versions wrote (mapped field by field,
-with :data:`LEGACY_DEFAULTS` for fields those versions did not have).
+written to ``config.json`` and :meth:`Config.from_dict` reads it back, including the flat dict of earlier
+versions (with :data:`LEGACY_DEFAULTS` for fields those versions did not have).
 """
 
 from __future__ import annotations
@@ -85,6 +40,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Mapping, Optional
 
+from jaxgest.runtime.config import get_preset
 from jaxgest.zeggs.features import PoseLayout
 
 SPEECH_DIM = 81  # 80 log-mel bands + log energy (jaxgest.audio.FEATURE_DIM)
@@ -209,10 +165,10 @@ class TrainConfig(_Compiled):
     style_window_max: int = 512  # longest style window (frames); batches pad to this with a mask
     style_sampling: str = "disjoint"  # where a training style window comes from (jaxgest.zeggs.data.style_window):
     #   "overlap" (the paper: contains the target), "disjoint" (same clip, apart from the target) or
-    #   "other-clip" (another clip of the same style label); see the module docstring
+    #   "other-clip" (another clip of the same style label); chosen in experiments/zeggs_synthetic
     initial_pose_shuffle: float = 0.0  # probability that a training row starts the generator from another
     #   row's first pose (the previous row of the batch) instead of its own; 0 = the paper (always its own).
-    #   Not in the paper: an experiment on which input carries the style (jaxgest.zeggs.steps.initial_poses)
+    #   Not in the paper (jaxgest.zeggs.steps.initial_poses); small's 0.2 chosen in experiments/zeggs_synthetic
     initial_pose_source: str = "row"  # what a shuffled row starts from: "row" (the previous row's first pose)
     #   or "mean" (the data's mean pose: zeros of the normalised features)
     initial_pose_mask_seconds: float = 0.0  # seconds at the start of a shuffled row left out of its
@@ -222,7 +178,7 @@ class TrainConfig(_Compiled):
     steps: int = 120_000  # default number of training steps (the authors')
     # --- compilation ----------------------------------------------------------------------------------
     xla_opt_level: Optional[int] = None  # XLA backend optimisation level of the jitted training functions
-    #   (None: XLA's default). 0 compiles ~2.5x faster and runs ~3x slower: right for tiny models, short runs.
+    #   (None: XLA's default; 0 compiles faster and runs slower: for tiny models and short runs)
 
     def __post_init__(self):
         if self.kl_reduction not in ("mean", "sum"):
@@ -336,9 +292,9 @@ PRESETS: dict[str, Config] = {
 }
 
 
-def preset(name: str = "paper", **overrides) -> Config:
-    """A preset by name, optionally with fields replaced by their bare names (see :meth:`Config.override`),
-    e.g. ``num_joints`` of the data's rig."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown ZeroEGGS preset {name!r}; choose from {sorted(PRESETS)}")
-    return PRESETS[name].override(**overrides) if overrides else PRESETS[name]
+def preset(name: str = "paper", **fields) -> Config:
+    """The preset ``name`` of :data:`PRESETS` (an unknown name: a one-line error listing them), optionally
+    with fields replaced by their bare names (:meth:`Config.override`; how the data's rig is set). Users
+    change fields with dotted overrides (:func:`jaxgest.runtime.config.apply_overrides`)."""
+    cfg = get_preset(PRESETS, name, "ZeroEGGS")
+    return cfg.override(**fields) if fields else cfg

@@ -25,7 +25,7 @@ built-in synthetic data) to fixed-size training batches (paper 001 §4.1, §4.3)
     right-handed style is a left-handed one (on the synthetic data ``neutral`` and ``left_handed`` differ
     only by that), and a style example of the other variant would teach the encoder to ignore handedness.
 
-  SPEC §4 allows a style window apart from the target if it is measured against the paper's; the
+  docs/design.md §4 allows a style window apart from the target if it is measured against the paper's; the
   comparison (leakage report, probes) is in ``experiments/zeggs_synthetic/README.md``.
 
 Batch layout (float32 unless said)::
@@ -49,7 +49,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import kinematics
 from jaxgest.motion import rotations
 from jaxgest.motion.datasets import Clip, NormStats, load_clip_audio, load_folder, resample_motion

@@ -1,6 +1,6 @@
 """ZeroEGGS evaluation: style/content probes with controls, a content-leakage report, beat alignment
 against a shuffled control, and the Fréchet distance between motion-feature statistics of generated and
-real clips (SPEC §5).
+real clips (docs/design.md §5).
 
 * **Probes** and **leakage**: :mod:`jaxgest.zeggs.probes` (:func:`probe`, :func:`leakage`), run here.
 * **Beat alignment**: for each test clip with audio, gestures are generated from its audio in its style,
@@ -13,7 +13,7 @@ real clips (SPEC §5).
   velocities) of the generated clips and of the real clips; the same distance between the real training
   clips and the real test clips is reported as the floor to compare with.
 
-References: Ghorbani et al. 2023, §5.1-5.2 (style generalisation, embedding space); SPEC §5; Li et al. 2021
+References: Ghorbani et al. 2023, §5.1-5.2 (style generalisation, embedding space); docs/design.md §5; Li et al. 2021
 (BeatAlign); Heusel et al. 2017 (Fréchet distance).
 """
 
@@ -26,7 +26,7 @@ from typing import Optional
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import body, kinematics
 from jaxgest.motion.datasets import load_clip_audio, load_folder
 from jaxgest.zeggs import features

@@ -1,4 +1,4 @@
-"""ZeroEGGS motion features: the pose vector ``a`` / pose state ``y`` (paper 001 §3.2-3.3, SPEC §2).
+"""ZeroEGGS motion features: the pose vector ``a`` / pose state ``y`` (paper 001 §3.2-3.3, docs/design.md §2).
 
 Per frame, for ``j`` joints (layout :class:`PoseLayout`, size ``15 j + 6``)::
 
@@ -34,7 +34,7 @@ import dataclasses
 import jax
 import numpy as np
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import rotations
 from jaxgest.motion.skeleton import Motion, Skeleton
 

@@ -59,7 +59,7 @@ class Dense(nn.Module):
         else:
             kernel = self.param("kernel", nn.initializers.lecun_normal(), shape, jnp.float32)
         bias = self.param("bias", nn.initializers.zeros_init(), (self.features,), jnp.float32)
-        if self.is_mutable_collection("calibration"):  # quant.calibrate: the mean input of every layer
+        if self.is_mutable_collection("calibration"):  # model.calibrate: the mean input of every layer
             self.sow("calibration", "input_mean", jnp.mean(x.reshape(-1, x.shape[-1]), axis=0))
         return dense_apply(x, kernel, bias)
 

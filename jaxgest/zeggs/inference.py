@@ -1,10 +1,11 @@
 """ZeroEGGS generation: speech + style example clip(s) -> gestures (zero-shot), blending, PCA edits, seeds.
 
 ``TrainedZeggs.generate(audio, styles, weights=None, seed=0, temperature=1.0, pca_edits=None) -> Motion``
-(:func:`load_model` reads a workdir through :mod:`jaxgest.zeggs.workdir`):
+(:func:`load` reads a workdir through :mod:`jaxgest.zeggs.workdir`; the model owns its compiled functions).
+``audio``: a WAV/FLAC path or ``(samples, sample_rate)``; ``styles``: a Motion or BVH path, or a list of them.
 
 1. speech features of the audio at the model rate, normalised with the training statistics;
-2. each style clip is brought to the training rig at the model rate (:func:`jaxgest.motion.retarget.to_rig`:
+2. each style clip is brought to the training rig at the model rate (:func:`jaxgest.motion.body.to_rig`:
    itself on the same rig, otherwise through the 21-joint body joint maps with the feet on the floor), its
    pose features normalised and encoded by the style encoder (posterior mean and log-variance), then
    sampled with ``temperature`` (one key per clip, ``fold_in(key(seed), i)``);
@@ -23,21 +24,58 @@ References: Ghorbani et al. 2023, §3 (inference from an example clip), §5.1 (z
 
 from __future__ import annotations
 
+import os
 import pathlib
-from typing import Optional, Sequence
+from typing import Optional, Sequence, Union
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.errors import DataError, JaxgestError
-from jaxgest.motion.retarget import to_rig
+from jaxgest.runtime.errors import DataError, JaxgestError
+from jaxgest.motion import bvh
+from jaxgest.motion.body import to_rig
 from jaxgest.motion.skeleton import Motion
 from jaxgest.zeggs import features, quant
 from jaxgest.zeggs.generator import input_scale
-from jaxgest.zeggs.model import apply_fns
+from jaxgest.zeggs.model import apply_fns, calibrate
 from jaxgest.zeggs.style_encoder import sample_style
 from jaxgest.zeggs.workdir import TrainedWorkdir, load_workdir
+
+
+StyleLike = Union[Motion, str, os.PathLike]
+
+
+def as_motions(styles) -> list[Motion]:
+    """One style clip or a list of them (Motions or BVH paths) -> a non-empty list of Motions."""
+    if isinstance(styles, (Motion, str, os.PathLike)):
+        styles = [styles]
+    out = []
+    for s in styles:
+        if not isinstance(s, (Motion, str, os.PathLike)):
+            raise JaxgestError(f"a style must be a Motion or a BVH path, got {type(s).__name__}")
+        out.append(bvh.as_motion(s, "style"))
+    if not out:
+        raise JaxgestError("at least one style clip is needed")
+    return out
+
+
+def audio_input(audio, sr: Optional[int] = None):
+    """``audio`` as ``(path, None)`` or ``(samples float32, sample_rate)``: a path (must exist), a
+    ``(samples, sample_rate)`` pair, or samples with ``sr``."""
+    if isinstance(audio, tuple):
+        if len(audio) != 2:
+            raise JaxgestError("audio must be a path or a (samples, sample_rate) pair")
+        return np.asarray(audio[0], np.float32), int(audio[1])
+    if isinstance(audio, (str, os.PathLike)):
+        if not pathlib.Path(audio).is_file():
+            raise JaxgestError(f"{audio}: no such audio file")
+        return audio, None
+    if isinstance(audio, np.ndarray) or hasattr(audio, "__array__"):
+        if sr is None:
+            raise JaxgestError("an audio array needs its sample rate: pass (samples, sample_rate)")
+        return np.asarray(audio, np.float32), int(sr)
+    raise JaxgestError("audio must be a path or a (samples, sample_rate) pair")
 
 
 def validate_weights(weights, count: int, *, normalize: bool = False) -> np.ndarray:
@@ -61,7 +99,7 @@ def validate_weights(weights, count: int, *, normalize: bool = False) -> np.ndar
 
 
 class TrainedZeggs:
-    """A trained ZeroEGGS model loaded from a workdir (see :func:`load_model`).
+    """A trained ZeroEGGS model loaded from a workdir (see :func:`load`).
 
     Attributes: ``cfg`` (:class:`jaxgest.zeggs.config.Config`), ``params``, ``pose_stats``,
     ``speech_stats``, ``reference`` (the training rig), ``meta`` (config.json), ``step`` (the checkpoint
@@ -102,14 +140,14 @@ class TrainedZeggs:
         s_emb = jnp.pad(s_emb, ((0, 0), (0, L - F), (0, 0)))
         if quant.check_format(weight_format) != "fp32":
             if weight_format not in self.quantized:
-                means = quant.calibrate(self.cfg.model, params, *self.calibration_inputs(params))
+                means = calibrate(self.cfg.model, params, *self.calibration_inputs(params))
                 self.quantized[weight_format] = quant.quantize_params(params, weight_format, input_means=means)
             params = self.quantized[weight_format]
         out = self.fns["generate"](params, s_emb, e, y0, r0, q0, f, mean, std)
         return {k: v[:, :F] for k, v in out.items()}
 
     def calibration_inputs(self, params, frames: int = 256) -> tuple:
-        """Generator inputs of the weight formats' bias correction (:func:`jaxgest.zeggs.quant.calibrate`):
+        """Generator inputs of the weight formats' bias correction (:func:`jaxgest.zeggs.model.calibrate`):
         the neutral request -- the mean speech frame (normalised features 0), style embedding 0 (the
         prior's mean), the mean pose, facing forward -- for ``frames`` frames; independent of any request."""
         m = self.cfg.model
@@ -175,7 +213,7 @@ class TrainedZeggs:
         """Normalised speech features ``(F, 81)`` at the model rate and the audio duration (s)."""
         from jaxgest.audio import load_audio, speech_features
 
-        if isinstance(audio, (str, pathlib.Path)):
+        if isinstance(audio, (str, os.PathLike)):
             y, sr = load_audio(audio)
         else:
             y = np.asarray(audio, np.float32)
@@ -189,18 +227,21 @@ class TrainedZeggs:
         return self.speech_stats.normalize(feats).astype(np.float32), duration
 
     # -- generation --------------------------------------------------------------------------------------
-    def generate(self, audio, styles: Sequence[Motion], *, weights=None, seed: int = 0,
+    def generate(self, audio, styles, *, weights=None, seed: int = 0,
                  temperature: Optional[float] = None,
                  pca_edits: Optional[dict] = None, sr: Optional[int] = None, name: str = "generated",
                  normalize_weights: bool = False, weight_format: str = "fp32") -> Motion:
-        """Gestures for ``audio`` in the (blended) style of ``styles``; a Motion on ``styles[0]``'s rig.
+        """Gestures for ``audio`` in the (blended) style of ``styles``; a Motion on the first style clip's rig.
 
-        ``weight_format``: ``fp32`` (default), ``bf16`` or ``int8`` generator weights (not the blend
-        ``weights``; see :mod:`jaxgest.zeggs.quant`)."""
+        ``audio``: a WAV/FLAC path or ``(samples, sample_rate)`` (or samples with ``sr``); ``styles``: a
+        Motion or BVH path, or a list of them (module docstring for ``weights``, ``seed``, ``temperature``,
+        ``pca_edits``); ``weight_format``: ``fp32`` (default), ``bf16`` or ``int8`` generator weights (not
+        the blend ``weights``; see :mod:`jaxgest.zeggs.quant`)."""
         if weight_format not in quant.WEIGHT_FORMATS:
             raise JaxgestError(f"weight format must be one of {', '.join(quant.WEIGHT_FORMATS)}, "
                                f"got {weight_format!r}")
-        styles = list(styles)
+        styles = as_motions(styles)
+        audio, sr = audio_input(audio, sr)
         e = self.style_embedding(styles, weights=weights, seed=seed, temperature=temperature, pca_edits=pca_edits,
                                  normalize_weights=normalize_weights)
         speech, duration = self.speech(audio, sr=sr)
@@ -231,7 +272,10 @@ def bucket_length(n: int, smallest: int = 64) -> int:
     return L
 
 
-def load_model(workdir) -> TrainedZeggs:
-    """The trained ZeroEGGS model of ``workdir`` (read now: no cache here; see
-    :class:`jaxgest.zeggs.api.ModelCache` for one keyed on the checkpoint step)."""
+def load(workdir) -> TrainedZeggs:
+    """The trained ZeroEGGS model of ``workdir``, read now (a long-lived caller keeps the returned model,
+    which also keeps its compiled functions)."""
     return TrainedZeggs(load_workdir(workdir), workdir)
+
+
+load_model = load  # the name the CLI and older callers use

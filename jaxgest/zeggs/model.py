@@ -108,3 +108,26 @@ def apply_fns(cfg: ModelConfig, compiler_options: Optional[dict] = None) -> dict
             {"params": p}, s, e, y0, r0, q0, f, mean, std, method=ZeggsModel.generate),
             compiler_options=compiler_options),
     }
+
+
+def calibrate(cfg, params: dict, speech: jax.Array, style: jax.Array, pose0: jax.Array,
+              root_position0: jax.Array, root_rotation0: jax.Array, facing: jax.Array, pose_mean=None,
+              pose_std=None) -> dict:
+    """Mean input ``(in,)`` of every layer of the recurrent decoder over a float32 generator run (the
+    arguments of ``ZeggsModel.generate``; all frames and batch rows), for :func:`jaxgest.zeggs.quant.quantize_params`."""
+    params = params if "generator" in params else {"generator": params}
+
+    def run(p, *args):
+        _, state = ZeggsModel(cfg).apply({"params": p}, *args, method=ZeggsModel.generate,
+                                         mutable=["calibration"])
+        return state["calibration"]["generator"]["decoder"]
+
+    sown = jax.jit(run)(params, speech, style, pose0, root_position0, root_rotation0, facing, pose_mean,
+                        pose_std)
+
+    def means(tree):
+        if "input_mean" in tree:
+            return np.mean(np.asarray(tree["input_mean"][0], np.float64), axis=0)
+        return {k: means(v) for k, v in tree.items()}
+
+    return means(sown)

@@ -18,8 +18,8 @@ from typing import Mapping
 
 import numpy as np
 
-from jaxgest.errors import CheckpointError, JaxgestError
-from jaxgest.io import write_text_atomic
+from jaxgest.runtime.errors import CheckpointError, JaxgestError
+from jaxgest.runtime.io import write_text_atomic
 
 
 @dataclasses.dataclass(frozen=True)

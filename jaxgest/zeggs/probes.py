@@ -12,7 +12,7 @@
 Both take a trained model (:func:`jaxgest.zeggs.inference.load_model`); :mod:`jaxgest.zeggs.evaluate`
 runs them with the generation metrics.
 
-References: Ghorbani et al. 2023, §5.1-5.2 (style generalisation, embedding space); SPEC §5.
+References: Ghorbani et al. 2023, §5.1-5.2 (style generalisation, embedding space); docs/design.md §5.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from typing import Optional
 import numpy as np
 
 from jaxgest import metrics
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 
 def _window_starts(frames: int, n: int, stride: int) -> list[int]:

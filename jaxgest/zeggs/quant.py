@@ -14,7 +14,7 @@ matrix-vector products. Narrower weights stream fewer bytes:
 The generator feeds its output back, so a systematic per-step error -- the error of the stored weights on
 the layer's mean input -- becomes an offset of the whole generated pose (measured: the time-constant part
 is ~90 % of the int8 pose difference). :func:`quantize_params` therefore takes optional ``input_means``
-(:func:`calibrate`: the mean input of every layer over a float32 run) and folds the weights' error on them
+(:func:`jaxgest.zeggs.model.calibrate`: the mean input of every layer over a float32 run) and folds the weights' error on them
 into the biases (bias correction); inference calibrates on the neutral request
 (:meth:`jaxgest.zeggs.inference.TrainedZeggs.calibration_inputs`), not on the request being generated.
 
@@ -27,7 +27,7 @@ once per sequence) stays float32; biases stay float32.
 Speed: XLA CPU (jaxlib 0.10.2) hoists the conversion of a loop-invariant narrow kernel out of the
 generator's scan, so through XLA every format streams float32 weights at batch 1 (with the hoisting
 disabled it fuses convert + multiply + reduce, no faster than the float32 dot). int8 at batch <= 4 runs a
-C++ kernel through ``jax.ffi`` instead (:mod:`jaxgest.zeggs.int8_kernel`, compiled on first use; XLA when
+C++ kernel through ``jax.ffi`` instead (:mod:`jaxgest.kernels.int8_kernel`, compiled on first use; XLA when
 no compiler is found). bf16 pays at batch 32 (a native bf16 GEMM). Numbers: ``README.md``.
 
 Accuracy (RMS of the pose difference against fp32 over 600 generated frames, % of the mean per-channel pose
@@ -37,7 +37,7 @@ range; bias correction calibrated on other inputs): paper preset, random weights
 training data through the inference pipeline (calibrated on the neutral request): int8 0.15-0.24 %, bf16
 0.10-0.15 %. A random ``small`` model (one of two seeds) sits where any persistent weight change moves the
 trajectory: int8 11 %, bf16 1.0 % there. The test bound (``tiny`` preset, 1 %) is in
-``tests/test_zeggs_quant.py``.
+``tests/unit/test_zeggs_quant.py``.
 
 References: Ghorbani et al. 2023, §3.3 (the generator); Jacob et al. 2018 (per-channel weight-only
 quantisation); Nagel et al. 2019 (the output bias of rounding errors in weight quantisation).
@@ -53,7 +53,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.zeggs import int8_kernel
+from jaxgest.kernels import int8_kernel
 
 WEIGHT_FORMATS = ("fp32", "bf16", "int8")
 INT8_GROUP = 32  # input channels per int8 scale
@@ -70,7 +70,7 @@ class QuantKernel:
     """A dense kernel of logical shape ``(in, out)`` stored narrow.
 
     bf16: ``w (in, out)`` bfloat16, ``scale`` None. int8: ``w (out, in_padded)`` int8 (input channels
-    contiguous, the layout of :mod:`jaxgest.zeggs.int8_kernel`; ``in_padded`` a multiple of ``group``, zero
+    contiguous, the layout of :mod:`jaxgest.kernels.int8_kernel`; ``in_padded`` a multiple of ``group``, zero
     weights at the end), ``scale (out, in_padded / group)`` float32.
     """
 
@@ -141,7 +141,7 @@ def dense_apply(x: jax.Array, kernel, bias: Optional[jax.Array] = None) -> jax.A
 
     The one dense product of the generator (:class:`jaxgest.zeggs.generator.Dense`). bf16: a bf16 x bf16
     -> f32 ``dot`` (``x`` rounded to bf16); int8: up to ``int8_kernel.MAX_ROWS`` rows the int8 CPU kernel
-    (:mod:`jaxgest.zeggs.int8_kernel`, when it is available), otherwise ``x`` times the dequantised kernel.
+    (:mod:`jaxgest.kernels.int8_kernel`, when it is available), otherwise ``x`` times the dequantised kernel.
     """
     if isinstance(kernel, QuantKernel) and kernel.scale is None:
         y = jnp.dot(x.astype(jnp.bfloat16), kernel.w, preferred_element_type=jnp.float32)
@@ -166,7 +166,7 @@ def quantize_params(params: dict, weight_format: str, group: int = INT8_GROUP,
     """The model's params (the full tree or its ``generator`` subtree) with every kernel of the generator's
     recurrent decoder in ``weight_format`` (same tree, :class:`QuantKernel` leaves); the rest unchanged.
 
-    ``input_means`` (:func:`calibrate`; same tree as the decoder's params, ``(in,)`` mean input per layer):
+    ``input_means`` (:func:`jaxgest.zeggs.model.calibrate`; same tree as the decoder's params, ``(in,)`` mean input per layer):
     bias correction -- each layer's bias absorbs the error of its stored kernel on its mean input,
     ``b' = b - (W_stored - W)^T E[x]``, so the quantised layer is exact on average over the calibration
     run (Nagel et al. 2019, §4.2 "bias correction").
@@ -188,31 +188,6 @@ def quantize_params(params: dict, weight_format: str, group: int = INT8_GROUP,
         g = quantize_params(params["generator"], weight_format, group, input_means)
         return {**params, "generator": g}
     return {**params, "decoder": convert(dict(params["decoder"]), input_means)}
-
-
-def calibrate(cfg, params: dict, speech: jax.Array, style: jax.Array, pose0: jax.Array,
-              root_position0: jax.Array, root_rotation0: jax.Array, facing: jax.Array, pose_mean=None,
-              pose_std=None) -> dict:
-    """Mean input ``(in,)`` of every layer of the recurrent decoder over a float32 generator run (the
-    arguments of ``ZeggsModel.generate``; all frames and batch rows), for :func:`quantize_params`."""
-    from jaxgest.zeggs.model import ZeggsModel  # the model imports this module
-
-    params = params if "generator" in params else {"generator": params}
-
-    def run(p, *args):
-        _, state = ZeggsModel(cfg).apply({"params": p}, *args, method=ZeggsModel.generate,
-                                         mutable=["calibration"])
-        return state["calibration"]["generator"]["decoder"]
-
-    sown = jax.jit(run)(params, speech, style, pose0, root_position0, root_rotation0, facing, pose_mean,
-                        pose_std)
-
-    def means(tree):
-        if "input_mean" in tree:
-            return np.mean(np.asarray(tree["input_mean"][0], np.float64), axis=0)
-        return {k: means(v) for k, v in tree.items()}
-
-    return means(sown)
 
 
 def weight_bytes(params: dict) -> int:

@@ -1,4 +1,4 @@
-"""ZeroEGGS loss terms, optimiser and the pure training step (built by :func:`jaxgest.training.make_update_step`).
+"""ZeroEGGS loss terms, optimiser and the pure training step (built by :func:`jaxgest.runtime.training.make_update_step`).
 
 Batch layout (float32 unless said; produced by :meth:`jaxgest.zeggs.data.ZeggsData.batch`)::
 
@@ -35,7 +35,7 @@ import numpy as np
 import optax
 from flax.training.train_state import TrainState
 
-from jaxgest.training import make_update_step
+from jaxgest.runtime.training import make_update_step
 from jaxgest.zeggs import losses
 from jaxgest.zeggs.config import Config, ModelConfig
 from jaxgest.zeggs.generator import input_scale

@@ -38,7 +38,7 @@ def sample_style(mu: jax.Array, logvar: jax.Array, key: jax.Array, temperature: 
     """Reparameterised sample ``e = mu + temperature * sigma * eps``, ``eps ~ N(0, I)``; (batch, D_e).
 
     ``temperature`` scales the posterior's standard deviation (0 gives mu, 1 the trained posterior). The
-    authors' code divides sigma by its "temperature" instead; the paper leaves it open (SPEC §4 asks for
+    authors' code divides sigma by its "temperature" instead; the paper leaves it open (docs/design.md §4 asks for
     a temperature at inference), we use the usual multiplicative convention.
     References: Kingma & Welling 2013, §2.4; Ghorbani et al. 2023, §3.2.
     """

@@ -1,6 +1,6 @@
 """A ZeroEGGS workdir: file names, ``config.json``, checkpoint meta and loading a trained model.
 
-Imported by both training (:mod:`jaxgest.zeggs.train`) and inference (:mod:`jaxgest.zeggs.inference`,
+Imported by both training (:mod:`jaxgest.zeggs.trainer`) and inference (:mod:`jaxgest.zeggs.inference`,
 :mod:`jaxgest.zeggs.evaluate`), so inference never imports the training module.
 
 The workdir holds ``config.json`` (``"model": "zeggs"``, the preset name, the three-part config
@@ -9,7 +9,7 @@ The workdir holds ``config.json`` (``"model": "zeggs"``, the preset name, the th
 template generation writes onto), ``checkpoints/zeggs/<step>/`` and ``metrics.jsonl``.
 
 A checkpoint carries and checks only :func:`checkpoint_config`: the model part of the config and the pose
-statistics shape (plus the skeleton signature, checked by :class:`jaxgest.training.Checkpointer`), so any
+statistics shape (plus the skeleton signature, checked by :class:`jaxgest.runtime.training.Checkpointer`), so any
 training or inference setting may change between a run and its resumption. Workdirs of earlier versions
 (a flat config dict in ``config.json`` and in their checkpoints) are read through
 :meth:`Config.from_dict`.
@@ -25,11 +25,11 @@ from typing import Any, Mapping, Optional
 import jax
 import numpy as np
 
-from jaxgest.errors import CheckpointError
+from jaxgest.runtime.errors import CheckpointError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats
 from jaxgest.motion.skeleton import Motion
-from jaxgest.training import FORMAT_VERSION, Checkpointer, check_workdir_config, write_json_atomic
+from jaxgest.runtime.training import FORMAT_VERSION, Checkpointer, check_workdir_config, write_json_atomic
 from jaxgest.zeggs.config import Config, ModelConfig
 from jaxgest.zeggs.model import param_shapes
 
@@ -57,7 +57,7 @@ def stored_checkpoint_config(config: Mapping[str, Any]) -> dict:
 
 
 class ZeggsCheckpointer(Checkpointer):
-    """The :class:`jaxgest.training.Checkpointer` of a ZeroEGGS workdir: a stored meta item is compared as
+    """The :class:`jaxgest.runtime.training.Checkpointer` of a ZeroEGGS workdir: a stored meta item is compared as
     :func:`stored_checkpoint_config` (so checkpoints of earlier versions, with one flat config, are checked
     field by field against the model config instead of refused as another layout)."""
 

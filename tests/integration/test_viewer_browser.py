@@ -1,5 +1,5 @@
 """The HTML viewer in a real browser: headless Chromium (the system package) opens a generated page from disk
-(file://), driven over the DevTools protocol (tests/browser_testing.py, standard library only).
+(file://), driven over the DevTools protocol (tests/helpers/browser_testing.py, standard library only).
 
 Checks (issue 40): (a) every panel has skeleton pixels (the left/right bone colours), (b) screenshots at two
 times differ inside every panel, (c) the page's frame count, frame rate and duration of each clip equal the

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from jaxgest import viewer
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion import bvh
 from jaxgest.motion.kinematics import forward_kinematics
 from jaxgest.motion.skeleton import Motion, Skeleton

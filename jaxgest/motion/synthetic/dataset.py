@@ -7,8 +7,9 @@ import io
 import itertools
 import pathlib
 
-from jaxgest.errors import DataError
-from jaxgest.io import write_text_atomic
+from jaxgest.runtime.errors import DataError
+from jaxgest.runtime.io import write_text_atomic
+from jaxgest.motion.synthetic.clips import SAMPLE_RATE, render_clip
 from jaxgest.motion.synthetic.content import CONTENTS
 from jaxgest.motion.synthetic.styles import STYLES
 
@@ -40,7 +41,6 @@ def write_dataset(out_dir, clips=None, seed: int = 0, fps: float = 60.0, seconds
     from tqdm import tqdm
 
     from jaxgest.motion import bvh
-    from jaxgest.motion.synthetic import SAMPLE_RATE, render_clip
 
     out = pathlib.Path(out_dir)
     if out.exists() and not out.is_dir():

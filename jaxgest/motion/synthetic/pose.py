@@ -89,7 +89,7 @@ def _main_child(skel, j):
 
 
 def make_rig(skel) -> Rig:
-    """Build the reference stance of ``skel`` (names as in SPEC §2: Hips ... Toes_R)."""
+    """Build the reference stance of ``skel`` (names as in docs/design.md §2: Hips ... Toes_R)."""
     J = skel.num_joints
     off = skel.offsets
     axis = np.zeros((J, 3))

@@ -1,4 +1,4 @@
-"""Named performance styles of the built-in synthetic data (SPEC §9).
+"""Named performance styles of the built-in synthetic data (docs/design.md §9).
 
 A style is a transformation of *how* a content script is performed; the script (strokes, apex times,
 audio) is fixed by the content. Every field is a known, documented number, so a style-transfer result can

@@ -1,0 +1,1 @@
+"""Compiled CPU kernels called through ``jax.ffi`` (C++ source inline, built on first use)."""

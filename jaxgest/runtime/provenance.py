@@ -1,0 +1,91 @@
+"""Stamped results files: every result names the commit, the package version, the resolved config and the
+command that produced it.
+
+A results file is JSON of the form ``{"stamp": {...}, "results": {...}}``. :func:`stamp` builds the stamp,
+:func:`write_results` writes it atomically, :func:`read_results` reads it back and refuses a file without a
+complete stamp (one line naming the file). Experiment READMEs generate their tables from such files.
+
+References: docs/design.md (results and provenance).
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import platform
+import shlex
+import subprocess
+import sys
+
+from jaxgest.runtime.errors import DataError
+from jaxgest.runtime.io import write_json_atomic
+
+STAMP_KEYS = ("commit", "dirty", "version", "config", "command")
+
+
+def _git(args, cwd) -> str | None:
+    try:
+        out = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() if out.returncode == 0 else None
+
+
+def commit_of(path=None) -> tuple[str | None, bool | None]:
+    """(commit hash, working tree dirty?) of the git checkout holding ``path`` (default: this package).
+
+    ``(None, None)`` outside a checkout (an installed package): the stamp then says so instead of guessing.
+    """
+    where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
+    where = where if where.is_dir() else where.parent
+    head = _git(["rev-parse", "HEAD"], where)
+    if head is None:
+        return None, None
+    status = _git(["status", "--porcelain", "--untracked-files=no"], where)
+    return head, bool(status)
+
+
+def stamp(config: dict, command: str | list | None = None, repo=None) -> dict:
+    """The stamp of a result: commit (and whether the tree had uncommitted changes), package version,
+    the resolved config (as given: a JSON-able dict) and the command (default: this process's argv)."""
+    from jaxgest._version import __version__
+    import jax
+
+    if command is None:
+        command = [pathlib.Path(sys.argv[0]).name, *sys.argv[1:]]
+    if not isinstance(command, str):
+        command = shlex.join(str(c) for c in command)
+    commit, dirty = commit_of(repo)
+    return {
+        "commit": commit,
+        "dirty": dirty,
+        "version": __version__,
+        "config": json.loads(json.dumps(config, default=str)),
+        "command": command,
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "machine": platform.machine(),
+    }
+
+
+def write_results(path, results: dict, config: dict, command=None) -> pathlib.Path:
+    """Write ``{"stamp": stamp(config, command), "results": results}`` to ``path`` atomically."""
+    return write_json_atomic(path, {"stamp": stamp(config, command, repo=pathlib.Path(path).resolve().parent),
+                                    "results": results})
+
+
+def read_results(path) -> dict:
+    """A results file's ``{"stamp", "results"}``; :class:`DataError` (one line) when it is not one."""
+    path = pathlib.Path(path)
+    try:
+        obj = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such results file") from None
+    except (OSError, ValueError) as e:
+        raise DataError(f"{path}: not a readable JSON results file ({e})") from None
+    if not isinstance(obj, dict) or "stamp" not in obj or "results" not in obj:
+        raise DataError(f"{path}: not a stamped results file (needs 'stamp' and 'results')")
+    missing = [k for k in STAMP_KEYS if k not in obj["stamp"]]
+    if missing:
+        raise DataError(f"{path}: stamp lacks {', '.join(missing)}")
+    return obj

@@ -1,0 +1,411 @@
+"""Data-parallel training (jaxgest.runtime.parallel): 4 devices train to the parameters of 1 device.
+
+The test process has 4 fake CPU devices (tests/conftest.py, ``jax_num_cpu_devices``). Two layers are checked:
+
+* the mechanism: the worker of tests/integration/_parallel_worker.py runs IN-PROCESS on 1 device and on 4 devices with
+  its two toy models (an MLP and a strided conv net; :mod:`jaxgest.runtime.parallel` knows nothing about the model):
+  same parameters and losses, the batch split in blocks over the devices, the state replicated, an all-reduce
+  in the compiled step, the device count in metrics.jsonl;
+* the real models: ``tgst.train.train`` and ``zeggs.train.train`` with ``devices=4`` and the session's tiny
+  settings (tests/helpers/tiny_models.py) end with the parameters and losses of the session's 1-device models
+  (tests/conftest.py), and config.json / metrics.jsonl record the 4 devices.
+
+One true multi-process run remains (marked slow): 2 processes x 2 devices joined by ``jax.distributed``
+(``JAX_COORDINATOR_ADDRESS`` on localhost), each host reading only its block of the batch, in subprocesses
+whose ``XLA_FLAGS`` give each 2 devices. The remaining in-process tests cover the mesh API and its errors.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import pathlib
+import socket
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxgest.runtime import parallel
+from jaxgest.runtime.errors import JaxgestError
+from jaxgest.tgst.config import preset as tgst_preset
+from jaxgest.runtime.training import TrainState
+
+from faults_testing import params_at
+from tiny_models import TGST_STEPS, ZEGGS_STEPS, train_tgst, train_zeggs
+
+WORKER = pathlib.Path(__file__).with_name("_parallel_worker.py")
+_spec = importlib.util.spec_from_file_location("_parallel_worker", WORKER)
+worker = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(worker)
+MODELS = sorted(worker.BUILDERS)
+#: The 2-process run feeds the batch through the host-local path, which does not depend on the model.
+HOST_MODELS = MODELS
+STEPS, BATCH, SEED = 4, 8, 3
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+def _host_env(host_devices: int, **extra) -> dict:
+    # no persistent XLA cache in the jax.distributed workers: one process would write what the other reads
+    # while both are compiling
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
+    env.update(XLA_FLAGS=f"--xla_force_host_platform_device_count={host_devices}", JAX_PLATFORMS="cpu",
+               PYTHONPATH=str(WORKER.parents[2]), **extra)
+    return env
+
+
+def _worker_args(out: pathlib.Path) -> list:
+    return ["--steps", str(STEPS), "--batch", str(BATCH), "--seed", str(SEED), "--out", str(out)]
+
+
+def _start_hosts(root: pathlib.Path) -> list:
+    """Start the 2 worker processes (2 devices each) joined by jax.distributed; returns (process, log) pairs."""
+    port = _free_port()
+    cmd = ([sys.executable, str(WORKER), "--host-local"] + _worker_args(root / "hosts")
+           + [a for m in HOST_MODELS for a in ("--model", m)])
+    # Output to files, not pipes: a worker blocked on a full pipe that is not read yet would stall its
+    # jax.distributed peer (which then fails the shutdown barrier).
+    logs = [open(root / f"host{p}.log", "w+") for p in range(2)]
+    return [(subprocess.Popen(cmd, env=_host_env(2, JAX_COORDINATOR_ADDRESS=f"localhost:{port}",
+                                                 JAX_NUM_PROCESSES="2", JAX_PROCESS_ID=str(p)),
+                              stdout=logs[p], stderr=subprocess.STDOUT, text=True), logs[p]) for p in range(2)]
+
+
+@pytest.fixture(scope="module")
+def hosts_started(request, tmp_path_factory):
+    """The 2-process run, started before the in-process runs when a selected test needs it (it is mostly
+    compile time, so it overlaps with theirs); None otherwise."""
+    if not any(item.path == request.path and "host_runs" in getattr(item, "fixturenames", ())
+               for item in request.session.items):
+        yield None
+        return
+    root = tmp_path_factory.mktemp("parallel_hosts")
+    procs = _start_hosts(root)
+    yield root, procs
+    for proc, log_file in procs:  # only left running when the module ended early
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        log_file.close()
+
+
+@pytest.fixture(scope="module")
+def runs(hosts_started, tmp_path_factory):
+    """The worker in this process on 1 device and on 4 devices; returns the output folders."""
+    assert jax.device_count() == 4, "tests/conftest.py configures 4 fake CPU devices"
+    root = tmp_path_factory.mktemp("parallel")
+    assert worker.main(["--devices", "1"] + _worker_args(root / "one")) == 0
+    assert worker.main(["--devices", "4"] + _worker_args(root / "four")) == 0
+    return {"one": root / "one", "four": root / "four"}
+
+
+@pytest.fixture(scope="module")
+def host_runs(hosts_started):
+    """The true multi-process run: 2 worker processes x 2 devices joined by jax.distributed."""
+    assert hosts_started is not None
+    root, procs = hosts_started
+    failed = []
+    for p, (proc, log_file) in enumerate(procs):
+        try:
+            proc.wait(timeout=1200)  # generous: 2 shared cores, cold compilation
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        log_file.seek(0)
+        log = log_file.read()
+        log_file.close()
+        if proc.returncode != 0:
+            failed.append(f"host{p}: exit {proc.returncode}\n{log[-3000:]}")
+    if failed:
+        pytest.fail("parallel worker failed:\n" + "\n".join(failed))
+    return {f"host{p}": root / "hosts" / f"proc{p}" for p in range(2)}
+
+
+def _info(folder: pathlib.Path) -> dict:
+    return json.loads((folder / "info.json").read_text())
+
+
+def _assert_same_params(a: pathlib.Path, b: pathlib.Path, init: pathlib.Path) -> None:
+    """Same parameters (npz files of the worker) up to float reassociation of the cross-device sums.
+
+    Adam divides each gradient element by its own magnitude, so an element whose gradient is tiny compared
+    with the rounding error of the gradient sum can move differently (by up to lr per step); a handful of
+    such elements are allowed per leaf (<= 0.2 %), each within 5 % of the largest movement of its leaf.
+    """
+    pa, pb, p0 = np.load(a), np.load(b), np.load(init)
+    assert sorted(pa.files) == sorted(pb.files)
+    for k in pa.files:
+        close = np.isclose(pb[k], pa[k], rtol=1e-5, atol=1e-6)
+        if close.all():
+            continue
+        moved = float(np.max(np.abs(pa[k] - p0[k])))
+        worst = float(np.max(np.abs(pb[k] - pa[k])))
+        assert np.count_nonzero(~close) <= max(1, 0.002 * close.size) and worst <= 0.05 * moved, (
+            f"{k}: {np.count_nonzero(~close)} of {close.size} elements differ, worst by {worst:.3g} "
+            f"(largest movement {moved:.3g})")
+
+
+#: Adam divides each gradient element by its own magnitude, so an element whose gradient is tiny compared with
+#: the rounding error of the cross-device gradient sum can step by +-lr in a direction that depends on the
+#: summation order, i.e. on the number of devices. The TGST autoencoder and ZeroEGGS agree everywhere within
+#: rtol 1e-5 / atol 1e-6. The tiny TGST transformer has many small gradients: its elements agree within 2 %
+#: of one Adam step (atol 0.02 lr; measured <= 1e-5 with lr 1e-3) except a handful (<= 0.2 % of a leaf, each
+#: within Adam's bound (1 - b1) / sqrt(1 - b2) * lr ~ 3.2 lr per step of the other run), and the key bias of
+#: the decoder's cross-attention has a gradient that is identically zero in exact arithmetic (every logit of
+#: a query moves by the same q.b; the softmax is invariant to that shift): all of it is rounding noise, only
+#: bounded. (The encoder's key bias has a real gradient: the structure loss, eqs. 9-10, uses the encoder's
+#: keys themselves; it is compared like every other leaf.)
+_TR_LR = tgst_preset("tiny").train.transformer.learning_rate
+ADAM_NOISE = {"transformer": {"atol": 0.02 * _TR_LR, "handful": 0.002, "lr": _TR_LR,
+                              "zero_gradient": {"['params']['decoder']['key']['bias']"}}}
+STRICT = {"atol": 1e-6, "handful": 0.0, "lr": 0.0, "zero_gradient": set()}
+
+
+def _assert_same_checkpoint(one: pathlib.Path, four: pathlib.Path, stage: str, step: int) -> None:
+    """The parameters of two runs' checkpoints of ``stage`` at ``step`` agree up to float reassociation of
+    the cross-device sums (``ADAM_NOISE``, ``STRICT`` otherwise)."""
+    pa, pb = params_at(one / "checkpoints" / stage, step), params_at(four / "checkpoints" / stage, step)
+    assert sorted(pa) == sorted(pb)
+    params = [k for k in pa if k.startswith("['params']")]
+    noise = ADAM_NOISE.get(stage, STRICT)
+    assert params and noise["zero_gradient"] <= set(params)
+    for k in params:
+        differ = ~np.isclose(pb[k], pa[k], rtol=1e-5, atol=noise["atol"])
+        handful = int(noise["handful"] * differ.size) + (noise["handful"] > 0)
+        allowed = differ.size if k in noise["zero_gradient"] else handful
+        worst = float(np.max(np.abs(pb[k] - pa[k])))
+        within_adam = not differ.any() or worst <= 2 * 3.2 * noise["lr"] * step
+        assert np.count_nonzero(differ) <= allowed and within_adam, (
+            f"{stage} {k}: {np.count_nonzero(differ)} of {differ.size} elements differ, worst by {worst:.3g}")
+
+
+def test_every_registered_model_is_run(runs):
+    assert MODELS == ["toy_conv1d", "toy_mlp"] and HOST_MODELS == MODELS
+    for run in runs.values():
+        assert sorted(_info(run)["models"]) == MODELS
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_four_devices_train_like_one(runs, model):
+    _assert_same_params(runs["one"] / f"{model}.npz", runs["four"] / f"{model}.npz",
+                        runs["one"] / f"{model}_init.npz")
+    one, four = _info(runs["one"])["models"][model], _info(runs["four"])["models"][model]
+    # The loss is the mean over the GLOBAL batch on both: same numbers, not a per-device mean.
+    np.testing.assert_allclose(four["losses"], one["losses"], rtol=1e-5)
+    assert len(one["losses"]) == STEPS
+    # And training moved the parameters (the comparison is not between two initialisations).
+    start, trained = np.load(runs["one"] / f"{model}_init.npz"), np.load(runs["one"] / f"{model}.npz")
+    assert max(float(np.max(np.abs(trained[k] - start[k]))) for k in start.files) > 1e-3
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_batch_is_split_and_state_replicated(runs, model):
+    info = _info(runs["four"])
+    assert info["device_count"] == 4
+    m = info["models"][model]
+    assert m["device_info"] == {"devices": 4, "platform": "cpu", "processes": 1}
+    batch = m["batch_layout"]
+    assert batch["spec"] == "P('data',)" and batch["num_devices"] == 4 and batch["num_shards"] == 4
+    assert not batch["fully_replicated"]
+    per = BATCH // 4
+    assert [s[0] for s in batch["shard_shapes"]] == [per] * 4
+    assert batch["row_starts"] == [0, per, 2 * per, 3 * per]
+    assert m["batch_rows_match"] and m["global_and_host_local_paths_agree"]
+    for layout in m["param_layouts"] + [m["step_layout"]]:
+        assert layout["fully_replicated"] and layout["num_devices"] == 4 and layout["num_shards"] == 4
+    assert m["all_reduce_in_hlo"]  # the gradient mean crosses devices inside the compiled step
+    single = _info(runs["one"])["models"][model]
+    assert single["device_info"]["devices"] == 1 and not single["all_reduce_in_hlo"]
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_metrics_jsonl_records_device_count(runs, model):
+    for run, devices in (("one", 1), ("four", 4)):
+        lines = [json.loads(x) for x in _info(runs[run])["models"][model]["metrics_lines"]]
+        assert [r["step"] for r in lines] == list(range(1, STEPS + 1))
+        assert all(r["devices"] == devices and r["processes"] == 1 for r in lines)
+
+
+def test_errors_name_the_problem(runs):
+    errors = _info(runs["four"])["errors"]
+    assert "batch array ['x'] has 6 examples, not divisible by the 4 devices" in errors["indivisible"]
+    assert "--devices 5: only 4 cpu device(s) available" in errors["too_many"]
+    assert "--devices 0" in errors["zero"]
+    assert "['scale'] is a scalar" in errors["scalar"]
+    assert all(e.startswith("JaxgestError") for e in errors.values() if e)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", HOST_MODELS)
+def test_two_hosts_train_like_one_device(runs, host_runs, model):
+    for p in range(2):
+        info = _info(host_runs[f"host{p}"])
+        assert sorted(info["models"]) == HOST_MODELS
+        assert (info["process_index"], info["device_count"], info["local_device_count"]) == (p, 4, 2)
+        m = info["models"][model]
+        assert m["device_info"] == {"devices": 4, "platform": "cpu", "processes": 2}
+        _assert_same_params(runs["one"] / f"{model}.npz", host_runs[f"host{p}"] / f"{model}.npz",
+                            runs["one"] / f"{model}_init.npz")
+        # Host p holds only its contiguous block of the global batch.
+        per = BATCH // 4
+        assert m["batch_layout"]["shape"][0] == BATCH and m["batch_layout"]["num_shards"] == 2
+        assert m["batch_layout"]["row_starts"] == [2 * p * per, (2 * p + 1) * per]
+        assert m["batch_rows_match"] and m["global_and_host_local_paths_agree"]
+        assert all(x["fully_replicated"] and x["num_devices"] == 4 for x in m["param_layouts"])
+        assert "a 2-process run uses all 4 devices" in info["errors"]["partial_mesh"]
+
+
+@pytest.fixture(scope="module")
+def real_runs(tiny_data, tmp_path_factory):
+    """The session's tiny TGST and ZeroEGGS trained again, same data, seed, steps and intervals, on 4
+    devices through the library entry points."""
+    root = tmp_path_factory.mktemp("parallel_real")
+    train_tgst(tiny_data, root / "tgst", devices=4)
+    train_zeggs(tiny_data, root / "zeggs", devices=4)
+    return {"tgst": root / "tgst", "zeggs": root / "zeggs"}
+
+
+#: per real model: stage (its checkpoint folder) -> the final step of the tiny run
+REAL_STAGES = {"tgst": {"autoencoder": TGST_STEPS["ae_steps"],
+                        "transformer": TGST_STEPS["transformer_steps"]},
+               "zeggs": {"zeggs": ZEGGS_STEPS}}
+
+
+@pytest.mark.parametrize("kind", ["tgst", "zeggs"])
+def test_real_models_train_on_four_devices_like_one(real_runs, tgst_workdir, zeggs_workdir, kind):
+    """``tgst.train.train`` / ``zeggs.train.train`` with devices=4: config.json and every metrics line say so,
+    and the losses and final parameters are those of the session's 1-device run."""
+    four, one = real_runs[kind], {"tgst": tgst_workdir, "zeggs": zeggs_workdir}[kind]
+    config = json.loads((four / "config.json").read_text())
+    assert {k: config[k] for k in ("devices", "platform", "processes")} == {
+        "devices": 4, "platform": "cpu", "processes": 1}
+    lines4, lines1 = ([json.loads(x) for x in (w / "metrics.jsonl").read_text().splitlines()]
+                      for w in (four, one))
+    assert [(r["stage"], r["step"]) for r in lines4] == [(r["stage"], r["step"]) for r in lines1]
+    assert [r["stage"] for r in lines4] == [s for s, n in REAL_STAGES[kind].items() for _ in range(n)]
+    assert all(r["devices"] == 4 and r["processes"] == 1 for r in lines4)
+    assert all(r["devices"] == 1 for r in lines1)
+    # The loss is the mean over the GLOBAL batch on both: same numbers, not a per-device mean.
+    np.testing.assert_allclose([r["loss"] for r in lines4], [r["loss"] for r in lines1], rtol=1e-5)
+    for stage, step in REAL_STAGES[kind].items():
+        _assert_same_checkpoint(one, four, stage, step)
+
+
+def _python_names(path: pathlib.Path) -> list:
+    """Identifiers used in a Python file's code (strings and comments excluded)."""
+    import tokenize
+
+    with open(path, "rb") as f:
+        return [t.string for t in tokenize.tokenize(f.readline) if t.type == tokenize.NAME]
+
+
+def test_no_pmap_anywhere():
+    """Data parallelism is jit + shardings only: no ``pmap`` (nor ``xmap``) in the package, benchmarks or
+    tests."""
+    root = WORKER.parents[2]
+    files = [p for d in ("jaxgest", "benchmarks", "tests") for p in sorted((root / d).rglob("*.py"))]
+    assert len(files) > 20
+    used = [f"{p.relative_to(root)}: {n}" for p in files for n in _python_names(p) if n in ("pmap", "xmap")]
+    assert not used, used
+    # the check itself sees identifiers: parallel.py's step builder is found
+    assert "jit" in _python_names(root / "jaxgest" / "runtime" / "parallel.py")
+
+
+# ----- the mesh API ----------------------------------------------------------------------------------------
+
+def test_make_mesh_and_device_info(all_devices):
+    mesh = parallel.make_mesh()
+    assert mesh.axis_names == ("data",) and mesh.size == jax.device_count()
+    assert parallel.device_info(parallel.make_mesh(1)) == {
+        "devices": 1, "platform": jax.devices()[0].platform, "processes": 1}
+    with pytest.raises(JaxgestError, match=rf"--devices {jax.device_count() + 1}: only"):
+        parallel.make_mesh(jax.device_count() + 1)
+    with pytest.raises(JaxgestError, match="--devices -1"):
+        parallel.make_mesh(-1)
+
+
+def _linear_problem():
+    params = {"w": jnp.zeros((3,), jnp.float32), "b": jnp.zeros((), jnp.float32)}
+    state = TrainState.create(apply_fn=None, params=params, tx=optax.sgd(0.1))
+
+    def step_fn(state, batch, key):
+        def loss_fn(p):
+            noise = 0.01 * jax.random.normal(jax.random.fold_in(key, state.step), batch["y"].shape)
+            return jnp.mean((batch["x"] @ p["w"] + p["b"] - batch["y"] - noise) ** 2)
+
+        loss, grads = jax.value_and_grad(loss_fn)(state.params)
+        return state.apply_gradients(grads=grads), {"loss": loss}
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(4, 3)).astype(np.float32)
+    return state, step_fn, {"x": x, "y": (x @ np.float32([1, -2, 0.5]) + 0.3).astype(np.float32)}
+
+
+def test_parallel_step_equals_plain_jit_on_one_device(key):
+    mesh = parallel.make_mesh(1)
+    state, step_fn, batch = _linear_problem()
+    expected, m_expected = jax.jit(step_fn)(state, batch, key)
+    step = parallel.parallelize_step(step_fn, mesh)
+    replicated_state = parallel.replicate(state, mesh)
+    got, m_got = step(replicated_state, parallel.shard_batch(batch, mesh), key)
+    np.testing.assert_allclose(got.params["w"], expected.params["w"], rtol=1e-6)
+    np.testing.assert_allclose(m_got["loss"], m_expected["loss"], rtol=1e-6)
+    assert int(got.step) == 1 and got.params["w"].sharding == parallel.replicated(mesh)
+    assert got.tx is state.tx  # static fields pass through the sharded jit untouched
+    assert replicated_state.params["w"].is_deleted()  # the state was donated
+
+
+@settings(max_examples=25, deadline=None)
+@given(hosts=st.integers(1, 5), per=st.integers(1, 4), width=st.integers(1, 3))
+def test_host_shards_are_contiguous_blocks_covering_the_batch(hosts, per, width):
+    x = np.arange(hosts * per * width).reshape(hosts * per, width)
+    blocks = [parallel.host_shard(x, p, hosts) for p in range(hosts)]
+    assert all(b.shape == (per, width) for b in blocks)
+    np.testing.assert_array_equal(np.concatenate(blocks), x)
+
+
+def test_host_shard_errors_and_single_process_default():
+    x = np.arange(6)
+    np.testing.assert_array_equal(parallel.host_shard(x), x)  # one process: everything
+    with pytest.raises(JaxgestError, match="6 examples does not divide over 4 hosts"):
+        parallel.host_shard(x, 0, 4)
+    with pytest.raises(JaxgestError, match="host 2 of 2"):
+        parallel.host_shard(x, 2, 2)
+
+
+def test_distributed_init_only_when_asked():
+    assert parallel.maybe_initialize_distributed(env={}) is False
+    cluster_only = {"SLURM_JOB_ID": "1", "SLURM_NTASKS": "2", "OMPI_COMM_WORLD_SIZE": "2"}
+    assert parallel.maybe_initialize_distributed(env=cluster_only) is False
+    assert not jax.distributed.is_initialized()
+    with pytest.raises(JaxgestError, match="JAX_NUM_PROCESSES='two' is not an integer"):
+        parallel.maybe_initialize_distributed(
+            env={"JAX_COORDINATOR_ADDRESS": "h:1", "JAX_NUM_PROCESSES": "two"})
+    with pytest.raises(JaxgestError, match=r"JAX_PROCESS_ID=2 must be in \[0, JAX_NUM_PROCESSES=2\)"):
+        parallel.maybe_initialize_distributed(
+            env={"JAX_COORDINATOR_ADDRESS": "h:1", "JAX_NUM_PROCESSES": "2", "JAX_PROCESS_ID": "2"})
+    assert not jax.distributed.is_initialized()
+
+
+def test_shard_batch_keeps_values_and_rejects_scalars():
+    mesh = parallel.make_mesh(1)
+    batch = {"a": np.arange(8, dtype=np.float32).reshape(4, 2), "b": np.ones((4,), np.int32)}
+    placed = parallel.shard_batch(batch, mesh)
+    assert placed["a"].sharding == parallel.data_sharding(mesh)
+    np.testing.assert_array_equal(np.asarray(placed["a"]), batch["a"])
+    local = parallel.host_local_batch_to_global(batch, mesh)
+    np.testing.assert_array_equal(np.asarray(local["b"]), batch["b"])
+    with pytest.raises(JaxgestError, match=r"batch array \['s'\] is a scalar"):
+        parallel.shard_batch({"s": jnp.float32(1.0)}, mesh)

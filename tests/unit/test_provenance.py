@@ -1,0 +1,34 @@
+import json
+
+import pytest
+
+from jaxgest.runtime import provenance
+from jaxgest.runtime.errors import DataError
+
+
+def test_stamp_names_commit_version_config_command(tmp_path):
+    cfg = {"preset": "tiny", "seed": 3, "nested": {"lr": 1e-3}}
+    p = provenance.write_results(tmp_path / "r.json", {"score": 0.5}, cfg, command=["jaxgest", "x", "--y", "a b"])
+    obj = provenance.read_results(p)
+    s = obj["stamp"]
+    assert s["config"] == cfg
+    assert s["command"] == "jaxgest x --y 'a b'"
+    assert s["version"] == __import__("jaxgest").__version__
+    assert obj["results"] == {"score": 0.5}
+    # tmp_path is outside any checkout: the stamp says so rather than guessing
+    assert s["commit"] is None and s["dirty"] is None
+
+
+def test_commit_inside_this_checkout():
+    commit, dirty = provenance.commit_of()
+    if commit is None:
+        pytest.skip("package not inside a git checkout")
+    assert len(commit) == 40 and isinstance(dirty, bool)
+
+
+@pytest.mark.parametrize("content", ["{", json.dumps({"results": {}}), json.dumps({"stamp": {"commit": "x"}, "results": {}})])
+def test_unstamped_file_refused(tmp_path, content):
+    p = tmp_path / "bad.json"
+    p.write_text(content)
+    with pytest.raises(DataError, match="bad.json"):
+        provenance.read_results(p)

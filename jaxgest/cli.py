@@ -24,7 +24,7 @@ import pathlib
 import sys
 from typing import Optional
 
-from jaxgest.errors import JaxgestError
+from jaxgest.errors import Interrupted, JaxgestError
 
 # Modules that contribute subcommands, in help order. A module that fails to import is a bug, not a
 # user error, so it is not hidden.
@@ -165,6 +165,9 @@ def main(argv=None) -> int:
     try:
         with _stderr_without_bars(), strict:
             rc = args.func(args)
+    except Interrupted as e:  # a checkpoint of the interrupted step was saved
+        print(f"jaxgest: {_one_line(str(e))}", file=sys.stderr)
+        return e.status
     except JaxgestError as e:
         print(f"jaxgest: {_one_line(str(e))}", file=sys.stderr)
         return 2

@@ -3,8 +3,9 @@
 Each command group lives beside its code and exposes ``register(subparsers)``; the registered parser
 sets ``func`` to a callable ``func(args) -> int | None``. Every :class:`jaxgest.errors.JaxgestError`, and
 every ``OSError`` no module handled (a full or read-only disk, ...), becomes one line on stderr and exit
-status 2. Every command that reads a workdir gets ``--strict`` (refuse an unreadable checkpoint instead of
-falling back to an older one).
+status 2; a training stopped by SIGINT / SIGTERM (:class:`jaxgest.errors.Interrupted`, raised once the
+checkpoint of the interrupted step is saved) prints its one line and exits 130 / 143. Every command that reads
+a workdir gets ``--strict`` (refuse an unreadable checkpoint instead of falling back to an older one).
 
 The command owns its process, so it (and only it) installs the process-wide filter of asyncio's "Event loop
 is closed" noise (:func:`jaxgest.orbax_noise.mute_closed_loop_errors_for_process`); library code scopes it.

@@ -75,6 +75,10 @@ def warn(message: str) -> None:
     print(f"jaxgest: warning: {message}", file=sys.stderr, flush=True)
 
 
+class _Vanished(Exception):
+    """A checkpoint step removed (by a concurrent training) while it was being read."""
+
+
 class Checkpointer:
     """orbax ``CheckpointManager`` over ``workdir/checkpoints`` with a config/skeleton-checked meta item.
 
@@ -314,12 +318,28 @@ class Checkpointer:
         return list(reversed(steps))
 
     def _restore_newest(self, read: Callable[[int], Any], step: Optional[int]):
-        """``(step, read(step))`` of the newest readable checkpoint; one warning line per fall-back."""
+        """``(step, read(step))`` of the newest readable checkpoint; one warning line per fall-back.
+
+        A reader (read-only) runs while a training may write: a step the writer removed meanwhile (an old
+        one beyond ``max_to_keep``) is not a damaged checkpoint; the steps are listed again (a few times)."""
+        for _ in range(5):
+            try:
+                return self._restore_newest_once(read, step)
+            except _Vanished as e:
+                vanished = e.args[0]
+                with _orbax_call():
+                    self.manager.reload()
+        raise CheckpointError(f"{self._where(vanished)} was removed while it was read (a training writing to "
+                              "this workdir replaces its checkpoints faster than they are read); try again")
+
+    def _restore_newest_once(self, read: Callable[[int], Any], step: Optional[int]):
         bad: list[tuple[int, str]] = []
         for s in self._candidates(step):
             try:
                 out = read(s)
             except Unreadable as e:
+                if self.read_only and step is None and not (self.directory / str(s)).exists():
+                    raise _Vanished(s) from None
                 bad.append((s, str(e)))
                 if self._strict() or step is not None:
                     older = [t for t in self.all_steps() if t < s]

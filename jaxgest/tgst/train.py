@@ -7,7 +7,8 @@ in :mod:`jaxgest.tgst.workdir`; config.json stores the effective :class:`~jaxges
 
 Both stages use optax Adam (§3.5), one jit-compiled step each (:func:`jaxgest.training.jit_config_step`,
 state donated, batch split over the devices) and :func:`jaxgest.training.train_loop` (NaN stop, tqdm,
-checkpoints). A run resumes from the latest checkpoint of each stage; a finished autoencoder is not
+checkpoints, a checkpoint of the interrupted step on SIGINT/SIGTERM). A training holds the workdir's writer lock
+(:mod:`jaxgest.workdir_lock`: a second writer is refused). A run resumes from the latest checkpoint of each stage; a finished autoencoder is not
 retrained. The transformer's checkpoint records the autoencoder step it was trained on: when the autoencoder
 has trained further, that transformer is moved aside (:func:`jaxgest.tgst.workdir.set_aside_stale_transformer`)
 and retrained.

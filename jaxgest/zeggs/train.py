@@ -4,7 +4,9 @@
 speech/pose sequences (mirrored, ±10 % speed), fits and saves the normalisation statistics, then runs the
 jit-compiled RAdam step (data-parallel over ``devices``) with orbax checkpoints and ``metrics.jsonl``.
 A killed run resumes from the last checkpoint with the same data order (batches are a pure function of
-``(seed, step)``) and ends with the parameters of an uninterrupted run. The data folder is given by the
+``(seed, step)``) and ends with the parameters of an uninterrupted run; SIGINT/SIGTERM save a checkpoint of the
+interrupted step first (:func:`jaxgest.training.train_loop`). A training holds the workdir's writer lock
+(:mod:`jaxgest.workdir_lock`: a second writer is refused). The data folder is given by the
 caller (the CLI chooses the built-in synthetic data when none is named).
 
 The workdir's files are described in :mod:`jaxgest.zeggs.workdir`; a resumed run must request the same

@@ -42,13 +42,13 @@ for arg in sys.argv[1:]:
 def test_fallback_is_one_line_every_time(tiny, tmp_path):
     cases = []  # (workdir, restores, strict, the line each restore must print)
     for name, damage, n, reason in (("truncated", truncate_data, 30, "a data file is truncated or corrupted"),
-                                    ("missing", missing_state, 4, "a file is missing"),
-                                    ("garbage", garbage_meta, 4, "its metadata is not valid JSON")):
+                                    ("missing", missing_state, 2, "a file is missing"),
+                                    ("garbage", garbage_meta, 2, "its metadata is not valid JSON")):
         work = copy(tiny, "tgst", tmp_path / name)
         damage(work / "checkpoints" / "transformer" / "4")
         cases.append((work, n, False, f"transformer checkpoint at step 4 is unreadable ({reason}); using step 2 "
                                       "instead (nothing was changed; --strict refuses)"))
-    cases.append((cases[0][0], 4, True, "transformer checkpoint at step 4 is unreadable (a data file is truncated "
+    cases.append((cases[0][0], 2, True, "transformer checkpoint at step 4 is unreadable (a data file is truncated "
                                         "or corrupted); --strict: not falling back to step 2"))
     r = subprocess.run([sys.executable, "-c", LOOP, *(f"{w},{n},{int(s)}" for w, n, s, _ in cases)],
                        env=subprocess_env(), capture_output=True, text=True, timeout=900)

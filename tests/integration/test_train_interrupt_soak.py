@@ -7,8 +7,9 @@
   and no step logged before the signal is lost, and the resumed run ends bit-identical too. A second signal
   during the save of the interrupt exits at once and leaves the previous checkpoint the latest.
 * The real commands (``python -m jaxgest.cli``): ZeroEGGS SIGTERM and TGST SIGINT (transformer stage) save the
-  interrupted step and exit 143 / 130 with one line; resumed (in-process, the same client as the subprocess)
-  they end bit-identical to an uninterrupted run of the same length.
+  interrupted step and exit 143 / 130 with one line; the TGST run, resumed (in-process, the same client as the
+  subprocess), ends bit-identical to an uninterrupted run of the same length. A reader (``zeggs generate``)
+  needs no lock while a training writes.
 * One writer: a second ``train`` on a workdir in use exits 2 with one line naming the holder's PID; after
   ``kill -9`` of the holder a new ``train`` resumes with one warning line.
 """
@@ -28,7 +29,7 @@ import time
 import pytest
 
 from conftest import NUM_DEVICES
-from faults_testing import assert_identical, params_at
+from faults_testing import assert_identical, params_at, run
 from tiny_models import CKPT_EVERY, TINY_SEED, train_tgst, train_zeggs
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
@@ -42,7 +43,8 @@ import jax, jax.numpy as jnp, optax
 from jaxgest.errors import Interrupted
 from jaxgest.training import Checkpointer, MetricsLogger, TrainState, train_loop
 
-work, steps, ckpt_every = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+if __name__ == "__main__":
+    work, steps, ckpt_every = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 state = TrainState.create(apply_fn=None, params={"w": jnp.zeros((64,), jnp.float32)}, tx=optax.adam(0.05))
 target = jnp.linspace(-1.0, 1.0, 64, dtype=jnp.float32)
 
@@ -55,18 +57,21 @@ def batch_fn(i):
     time.sleep(0.01)
     return jnp.float32(1.0 + 0.01 * i)
 
-ckpt = Checkpointer(work, kind="toy", config={"lr": 0.05}, max_to_keep=3)
-state = ckpt.restore(state)
-try:
-    train_loop(state, jax.jit(step_fn, donate_argnums=(0,)), batch_fn, key=jax.random.key(0), num_steps=steps,
-               checkpointer=ckpt, logger=MetricsLogger(work), log_every=1, ckpt_every=ckpt_every, progress=False)
-except Interrupted as e:  # what jaxgest.cli.main does
-    print(f"jaxgest: {e}", file=sys.stderr)
-    sys.exit(e.status)
-ckpt.close()
+def run(work, steps, ckpt_every):
+    with Checkpointer(work, kind="toy", config={"lr": 0.05}, max_to_keep=3) as ckpt:
+        train_loop(ckpt.restore(state), jax.jit(step_fn, donate_argnums=(0,)), batch_fn, key=jax.random.key(0),
+                   num_steps=steps, checkpointer=ckpt, logger=MetricsLogger(work), log_every=1,
+                   ckpt_every=ckpt_every, progress=False)
+
+if __name__ == "__main__":
+    try:
+        run(work, steps, ckpt_every)
+    except Interrupted as e:  # what jaxgest.cli.main does
+        print(f"jaxgest: {e}", file=sys.stderr)
+        sys.exit(e.status)
 """
 
-TOY_STEPS = 120
+TOY_STEPS = 72
 
 
 @pytest.fixture(scope="module")
@@ -147,11 +152,12 @@ def interrupted_line(err_text: str, work, what: str, name: str) -> int:
 
 
 @pytest.fixture(scope="module")
-def toy_reference(env, tmp_path_factory):
+def toy_reference(tmp_path_factory):
+    """The uninterrupted run, in this process (the subprocesses use the same CPU client, see ``env``)."""
     work = tmp_path_factory.mktemp("toy_reference")
-    with tempfile.TemporaryFile("w+") as err:
-        p = toy(work, env, err)
-        assert p.wait(timeout=600) == 0, err.seek(0) or err.read()[-3000:]
+    namespace = {"__name__": "toy"}
+    exec(compile(TOY, "toy", "exec"), namespace)  # noqa: S102  (the toy script above)
+    namespace["run"](work, TOY_STEPS, 3)
     return work
 
 
@@ -164,7 +170,7 @@ def test_toy_training_killed_at_10_random_moments_ends_identical(env, toy_refere
         with tempfile.TemporaryFile("w+") as err:
             logged = len(metrics(work))
             p = toy(work, env, err)
-            target = logged + rng.randint(1, 5)
+            target = logged + rng.randint(1, 4)
             wait_for(p, lambda t=target: len(metrics(work)) >= t, err)
             time.sleep(rng.uniform(0.0, 0.03))  # anywhere in a step or a save
             p.send_signal(signal.SIGKILL)
@@ -186,7 +192,7 @@ def test_toy_training_killed_at_10_random_moments_ends_identical(env, toy_refere
 def test_toy_training_sigterm_at_random_moments_loses_no_step(env, toy_reference, tmp_path):
     rng = random.Random(7)
     work = tmp_path / "w"
-    for _ in range(3):
+    for _ in range(2):
         with tempfile.TemporaryFile("w+") as err:
             before = len(metrics(work))
             p = toy(work, env, err, ckpt_every=1000)  # only the interrupt saves (and the end)
@@ -242,17 +248,18 @@ def test_second_signal_during_the_interrupt_save_exits_at_once(env, tmp_path):
 
 # ----- the real commands ------------------------------------------------------------------------------------
 
-def _zeggs_cmd(data, work, steps):
+def _zeggs_cmd(data, work, steps, ckpt_every=CKPT_EVERY):
     return cli("zeggs", "train", "--data", data, "--workdir", work, "--preset", "tiny", "--seed", TINY_SEED,
-               "--steps", steps, "--ckpt-every", CKPT_EVERY, "--log-every", 1, "--devices", 1)
+               "--steps", steps, "--ckpt-every", ckpt_every, "--log-every", 1, "--devices", 1)
 
 
 @pytest.mark.slow
-def test_zeggs_second_writer_refused_then_sigterm_saves_the_step(tiny_data, env, tmp_path):
+def test_zeggs_second_writer_refused_reader_served_then_sigterm_saves_the_step(tiny, env, tmp_path, capsys):
+    tiny_data = tiny["data"]
     work = tmp_path / "w"
     lock = work / ".jaxgest-train.lock"
     with tempfile.TemporaryFile("w+") as err:
-        p = start(_zeggs_cmd(tiny_data, work, 100_000), env, err)
+        p = start(_zeggs_cmd(tiny_data, work, 100_000, ckpt_every=25), env, err)
         wait_for(p, lambda: lock.is_file() and lock.read_text().strip(), err)
         # a second writer: refused at once, one line naming the holder
         r = subprocess.run(_zeggs_cmd(tiny_data, work, 100_000), env=env, capture_output=True, text=True,
@@ -260,8 +267,13 @@ def test_zeggs_second_writer_refused_then_sigterm_saves_the_step(tiny_data, env,
         assert r.returncode == 2, r.stderr[-3000:]
         assert r.stderr.count("\n") == 1 and r.stderr.startswith(
             f"jaxgest: {work}: another training is writing to this workdir (PID {p.pid} on "), r.stderr
-        # SIGTERM once it trains
-        wait_for(p, lambda: len(metrics(work)) >= 2, err)
+        # a reader needs no lock: it gets the newest complete checkpoint while the training writes
+        wait_for(p, lambda: complete_steps(work / "checkpoints" / "zeggs"), err)
+        rc, line, _ = run(["zeggs", "generate", "--workdir", work, "--audio", tiny["wav"], "--style", tiny["style"],
+                           "--out", tmp_path / "g.bvh"], capsys)
+        assert rc == 0 and line == "" and (tmp_path / "g.bvh").is_file(), line
+        # SIGTERM
+        assert p.poll() is None
         seen = max(r["step"] for r in metrics(work))
         p.send_signal(signal.SIGTERM)
         assert p.wait(timeout=300) == 143
@@ -269,12 +281,8 @@ def test_zeggs_second_writer_refused_then_sigterm_saves_the_step(tiny_data, env,
         step = interrupted_line(err.read(), work, "zeggs", "SIGTERM")
     assert step >= seen and complete_steps(work / "checkpoints" / "zeggs")[-1] == step
     assert lock.read_text() == ""  # released and cleared: the next run has nothing to report
-    total = step + 2
-    train_zeggs(tiny_data, work, steps=total)
-    ref = tmp_path / "ref"
-    train_zeggs(tiny_data, ref, steps=total)
-    assert_identical(params_at(work / "checkpoints" / "zeggs", total), params_at(ref / "checkpoints" / "zeggs", total))
-    assert by_step(metrics(work), "zeggs") == by_step(metrics(ref), "zeggs")
+    # (that a resumed run ends bit-identical is checked by the toy soak and the TGST case below: one loop)
+    assert max(r["step"] for r in metrics(work)) == step
 
 
 @pytest.mark.slow
@@ -301,16 +309,28 @@ def test_tgst_sigint_in_the_transformer_stage_saves_the_step(tiny_data, env, tmp
     assert by_step(metrics(work), "transformer") == by_step(metrics(ref), "transformer")
 
 
-@pytest.mark.slow
-def test_lock_of_a_killed_writer_is_taken_over_with_one_warning(tiny_data, env, tmp_path, capfd):
+HOLD = r"""
+import sys, time
+from jaxgest.workdir_lock import exclusive_workdir
+with exclusive_workdir(sys.argv[1]):
+    print("held", flush=True)
+    time.sleep(600)
+"""
+
+
+def test_lock_of_a_killed_writer_is_taken_over_with_one_warning(tiny_data, zeggs_workdir, env, tmp_path, capfd):
+    """A writer killed with SIGKILL (here a process that only holds the lock of a copy of the session's
+    ZeroEGGS workdir): the next ``train`` takes the workdir over with one warning line naming it, resumes from
+    its checkpoint, and clears the lock when it ends."""
+    import shutil
+
     work = tmp_path / "w"
-    ckdir = work / "checkpoints" / "zeggs"
-    with tempfile.TemporaryFile("w+") as err:
-        p = start(_zeggs_cmd(tiny_data, work, 100_000), env, err)
-        wait_for(p, lambda: complete_steps(ckdir), err)
-        p.send_signal(signal.SIGKILL)
-        p.wait()
-    last = complete_steps(ckdir)[-1]
+    shutil.copytree(zeggs_workdir, work)
+    p = subprocess.Popen([sys.executable, "-c", HOLD, str(work)], env=env, stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline() == "held\n"
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    last = complete_steps(work / "checkpoints" / "zeggs")[-1]
     capfd.readouterr()
     summary = train_zeggs(tiny_data, work, steps=last + 1)
     err = capfd.readouterr().err

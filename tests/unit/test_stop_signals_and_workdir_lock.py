@@ -86,7 +86,7 @@ def test_workdir_lock_one_writer(tmp_path):
         assert str(err.value).startswith(f"{tmp_path}: another training is writing to this workdir (PID "
                                          f"{os.getpid()} on {socket.gethostname()}, started ")
         assert str(err.value).endswith("); wait for it to end, stop it, or use another --workdir")
-    assert (tmp_path / LOCK_NAME).read_text() == ""  # a clean end clears it
+    assert not (tmp_path / LOCK_NAME).exists()  # a clean end removes it
     with exclusive_workdir(tmp_path, warn=pytest.fail):  # and the next writer has nothing to report
         pass
 
@@ -96,6 +96,7 @@ def test_lock_left_by_a_killed_writer_is_taken_over_with_one_warning(tmp_path):
     said = []
     with exclusive_workdir(tmp_path, warn=said.append):
         assert (tmp_path / LOCK_NAME).read_text().startswith(f"pid {os.getpid()} ")
+    assert not (tmp_path / LOCK_NAME).exists()
     assert said == [f"{tmp_path}: the training that held this workdir (PID 999999 on elsewhere, started "
                     "2026-01-01T00:00:00Z) is gone without finishing (killed?); taking over from its last "
                     "complete checkpoint"]
@@ -104,3 +105,23 @@ def test_lock_left_by_a_killed_writer_is_taken_over_with_one_warning(tmp_path):
 def test_only_process_0_locks(tmp_path):
     with exclusive_workdir(tmp_path / "w", primary=False):
         assert not (tmp_path / "w").exists()
+
+
+def test_an_error_inside_also_removes_the_lock(tmp_path):
+    with pytest.raises(RuntimeError), exclusive_workdir(tmp_path, warn=pytest.fail):
+        raise RuntimeError("a failed training")
+    assert not (tmp_path / LOCK_NAME).exists()
+
+
+def test_a_read_only_workdir_is_one_line(tmp_path, monkeypatch):
+    import errno
+
+    from jaxgest.errors import WriteError
+
+    def refuse(*a, **k):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+
+    monkeypatch.setattr("jaxgest.workdir_lock.os.open", refuse)
+    with pytest.raises(WriteError, match=rf"^{tmp_path}/{LOCK_NAME}: cannot write \(Read-only file system\); "
+                                         "training needs a writable workdir$"), exclusive_workdir(tmp_path):
+        pass

@@ -3,8 +3,9 @@
 Each command group lives in :mod:`jaxgest.commands` and exposes ``register(subparsers)``; the registered parser
 sets ``func`` to a callable ``func(args) -> int | None``. Every :class:`jaxgest.runtime.errors.JaxgestError`, and
 every ``OSError`` no module handled (a full or read-only disk, ...), becomes one line on stderr and exit
-status 2. Every command that reads a workdir gets ``--strict`` (refuse an unreadable checkpoint instead of
-falling back to an older one).
+status 2; a training stopped by SIGINT / SIGTERM (:class:`jaxgest.runtime.errors.Interrupted`, raised once the
+checkpoint of the interrupted step is saved) prints its one line and exits 130 / 143. Every command that reads
+a workdir gets ``--strict`` (refuse an unreadable checkpoint instead of falling back to an older one).
 
 The command owns its process, so it (and only it) installs the process-wide filter of asyncio's "Event loop
 is closed" noise (:func:`jaxgest.runtime.orbax_noise.mute_closed_loop_errors_for_process`); library code scopes it.
@@ -22,7 +23,7 @@ import io
 import sys
 
 from jaxgest.commands import bench, data, demo, tgst, zeggs
-from jaxgest.runtime.errors import JaxgestError
+from jaxgest.runtime.errors import Interrupted, JaxgestError
 
 # Modules that contribute subcommands, in help order (each imports its heavy parts inside its commands).
 COMMAND_MODULES = (
@@ -124,6 +125,9 @@ def main(argv=None) -> int:
     try:
         with _stderr_without_bars(), strict:
             rc = args.func(args)
+    except Interrupted as e:  # a checkpoint of the interrupted step was saved
+        print(f"jaxgest: {_one_line(str(e))}", file=sys.stderr)
+        return e.status
     except JaxgestError as e:
         print(f"jaxgest: {_one_line(str(e))}", file=sys.stderr)
         return 2

@@ -11,7 +11,9 @@ missing files) is skipped for the newest readable one with a one-line warning (:
 newer ``format_version`` or naming an unknown model is refused (:mod:`jaxgest.runtime.workdir_format`).
 
 No process-wide side effects: absl logging is quietened only around the orbax calls that log expected
-noise (:func:`jaxgest.runtime.orbax_noise.quiet_absl`), and the filter of asyncio's "Event loop is closed" errors
+noise (:func:`jaxgest.runtime.orbax_noise.quiet_absl`), orbax's asyncio loops let their pending reads end before they
+close only around those calls (:func:`jaxgest.runtime.orbax_noise.settled_event_loops`: a failed restore leaves no
+coroutine behind to print tracebacks when it is collected), and the filter of asyncio's "Event loop is closed" errors
 (:func:`jaxgest.runtime.orbax_noise.closed_loop_errors_muted`) is installed while a Checkpointer is open and removed by
 :meth:`Checkpointer.close` (the command line installs it for the whole command, see :mod:`jaxgest.cli`).
 
@@ -35,7 +37,7 @@ import numpy as np
 
 from jaxgest.runtime.checkpoint_faults import Unreadable, digest, flat, read_reason, tree_shapes, write_reason
 from jaxgest.runtime.errors import CheckpointError, WriteError
-from jaxgest.runtime.orbax_noise import closed_loop_errors_muted, quiet_absl
+from jaxgest.runtime.orbax_noise import closed_loop_errors_muted, quiet_absl, settled_event_loops
 from jaxgest.runtime.workdir_format import FORMAT_VERSION, check_workdir_config, config_diff, normalise
 
 __all__ = [
@@ -59,9 +61,22 @@ def strict_checkpoints(strict: bool = True):
         _STRICT.reset(token)
 
 
+@contextlib.contextmanager
+def _orbax_call(level=logging.CRITICAL):
+    """Around every orbax call: its expected absl messages quietened, and its asyncio loops settled before they
+    close (:func:`jaxgest.runtime.orbax_noise.settled_event_loops`: a failed read leaves no pending coroutine whose
+    later collection would print tracebacks)."""
+    with quiet_absl(level), settled_event_loops():
+        yield
+
+
 def warn(message: str) -> None:
     """One ``jaxgest: warning: ...`` line on stderr (a fault that was handled; the command goes on)."""
     print(f"jaxgest: warning: {message}", file=sys.stderr, flush=True)
+
+
+class _Vanished(Exception):
+    """A checkpoint step removed (by a concurrent training) while it was being read."""
 
 
 class Checkpointer:
@@ -128,7 +143,7 @@ class Checkpointer:
         self._muted = contextlib.ExitStack()
         self._muted.enter_context(closed_loop_errors_muted())
         try:
-            with quiet_absl(logging.ERROR):  # read-only: expected warnings about the options orbax adjusts
+            with _orbax_call(logging.ERROR):  # read-only: expected warnings about the options orbax adjusts
                 options = ocp.CheckpointManagerOptions(
                     max_to_keep=max(int(max_to_keep), 1),
                     create=not read_only,
@@ -157,7 +172,7 @@ class Checkpointer:
 
     def _read_meta(self, step: int) -> dict:
         try:
-            with quiet_absl():
+            with _orbax_call():
                 restored = self.manager.restore(
                     step, args=self._ocp.args.Composite(meta=self._ocp.args.JsonRestore()))
             meta = restored["meta"]
@@ -238,7 +253,7 @@ class Checkpointer:
         if checksum is not None:
             meta["sha256"] = checksum
         try:
-            with quiet_absl():
+            with _orbax_call():
                 self.manager.save(
                     step,
                     args=self._ocp.args.Composite(
@@ -267,7 +282,7 @@ class Checkpointer:
         except ImportError:  # another orbax layout: wait for every non-daemon helper thread instead
             orbax_thread = threading.Thread
         deadline = time.monotonic() + timeout
-        with quiet_absl():
+        with _orbax_call():
             for t in threading.enumerate():
                 if t is not threading.current_thread() and isinstance(t, orbax_thread) and t.is_alive():
                     t.join(max(deadline - time.monotonic(), 0.0))
@@ -291,7 +306,7 @@ class Checkpointer:
         if final.is_dir() and not (final / "_CHECKPOINT_METADATA").is_file():
             shutil.rmtree(final, ignore_errors=True)
         try:
-            with quiet_absl():
+            with _orbax_call():
                 self.manager.reload()
         except Exception:  # noqa: BLE001
             pass
@@ -303,12 +318,28 @@ class Checkpointer:
         return list(reversed(steps))
 
     def _restore_newest(self, read: Callable[[int], Any], step: Optional[int]):
-        """``(step, read(step))`` of the newest readable checkpoint; one warning line per fall-back."""
+        """``(step, read(step))`` of the newest readable checkpoint; one warning line per fall-back.
+
+        A reader (read-only) runs while a training may write: a step the writer removed meanwhile (an old
+        one beyond ``max_to_keep``) is not a damaged checkpoint; the steps are listed again (a few times)."""
+        for _ in range(5):
+            try:
+                return self._restore_newest_once(read, step)
+            except _Vanished as e:
+                vanished = e.args[0]
+                with _orbax_call():
+                    self.manager.reload()
+        raise CheckpointError(f"{self._where(vanished)} was removed while it was read (a training writing to "
+                              "this workdir replaces its checkpoints faster than they are read); try again")
+
+    def _restore_newest_once(self, read: Callable[[int], Any], step: Optional[int]):
         bad: list[tuple[int, str]] = []
         for s in self._candidates(step):
             try:
                 out = read(s)
             except Unreadable as e:
+                if self.read_only and step is None and not (self.directory / str(s)).exists():
+                    raise _Vanished(s) from None
                 bad.append((s, str(e)))
                 if self._strict() or step is not None:
                     older = [t for t in self.all_steps() if t < s]
@@ -337,7 +368,7 @@ class Checkpointer:
             warn(f"{what}; using step {used} instead (nothing was changed; --strict refuses)")
             return
         moved = [self._set_aside(s) for s, _ in bad]
-        with quiet_absl():
+        with _orbax_call():
             self.manager.reload()
         warn(f"{what}; resuming from step {used} (moved to {', '.join(moved)}; nothing was deleted)")
 
@@ -370,7 +401,7 @@ class Checkpointer:
         args = (self._ocp.args.StandardRestore(abstract) if abstract is not None else
                 self._ocp.args.StandardRestore())
         try:
-            with quiet_absl():
+            with _orbax_call():
                 restored = self.manager.restore(step, args=self._ocp.args.Composite(state=args))["state"]
         except MemoryError:
             raise
@@ -390,7 +421,7 @@ class Checkpointer:
     def _structure_mismatch(self, step: int, abstract) -> Optional[str]:
         """How the stored tree differs from ``abstract`` (None: it does not, or its metadata is damaged)."""
         try:
-            with quiet_absl():
+            with _orbax_call():
                 md = self._ocp.StandardCheckpointer().metadata(self.directory / str(step) / "state")
             stored = tree_shapes(getattr(md, "item_metadata", md))
         except Exception:  # noqa: BLE001

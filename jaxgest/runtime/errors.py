@@ -32,3 +32,14 @@ class WriteError(JaxgestError):
 
 class TrainingError(JaxgestError):
     """Training cannot continue (for example a non-finite loss)."""
+
+
+class Interrupted(JaxgestError):
+    """Training stopped by SIGINT or SIGTERM after saving a checkpoint at the interrupted step (see
+    :func:`jaxgest.runtime.training.stop_on_signals`); the command line exits with ``status`` (128 + the signal
+    number: 130 for SIGINT, 143 for SIGTERM)."""
+
+    def __init__(self, message: str, signum: int):
+        super().__init__(message)
+        self.signum = int(signum)
+        self.status = 128 + self.signum

@@ -5,17 +5,25 @@
   tensorstore callbacks raise after orbax gives up on a damaged checkpoint, and asyncio's "Task exception was
   never retrieved" log records of the tensorstore reads orbax abandoned (reentrant, restores the previous
   ``sys.unraisablehook`` and removes its logging filter); :func:`mute_closed_loop_errors_for_process` for an
-  entry point.
+  entry point;
+* :func:`settled_event_loops`: the source of that noise removed. orbax runs each restore/save in a fresh
+  asyncio loop and closes it as soon as the outer coroutine ends; when one array read fails, the reads of the
+  other arrays are still pending, and whenever the garbage collector later finalises them each prints a
+  traceback ("Exception ignored in: <coroutine object _read_array_index_and_device_put ...>", "Task was
+  destroyed but it is pending!", "Task exception was never retrieved", "Event loop is closed"), or not,
+  depending on its timing. Within this context a loop, before it closes, waits for its pending tasks to end and
+  retrieves their exceptions (what ``asyncio.run`` does at its end), so nothing is left to be collected.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import sys
 import threading
 
-__all__ = ["quiet_absl", "closed_loop_errors_muted", "mute_closed_loop_errors_for_process"]
+__all__ = ["quiet_absl", "closed_loop_errors_muted", "mute_closed_loop_errors_for_process", "settled_event_loops"]
 
 
 @contextlib.contextmanager
@@ -118,3 +126,77 @@ def mute_closed_loop_errors_for_process() -> None:
     point only (``jaxgest.cli.main``), where such callbacks can still fire at interpreter exit. Library code
     uses the context manager."""
     _mute_enter()
+
+
+class _SettlingLoop(asyncio.SelectorEventLoop):
+    """An event loop that, on :meth:`close`, first lets every task it ran end and retrieves the exceptions of
+    all of them: no task is left pending (a suspended read would be finalised later by the garbage collector,
+    printing a traceback) and no exception is left unretrieved (asyncio would log it on collection)."""
+
+    def __init__(self, settle_timeout: float = 120.0):
+        super().__init__()
+        import weakref
+
+        self._settle_timeout = settle_timeout
+        self._tasks = weakref.WeakSet()  # every task of this loop (all_tasks() lists only pending ones)
+        self.set_task_factory(self._make_task)
+
+    def _make_task(self, loop, coro, **kwargs):
+        task = asyncio.Task(coro, loop=loop, **kwargs)
+        self._tasks.add(task)
+        return task
+
+    def _settle(self) -> None:
+        deadline = self.time() + self._settle_timeout
+        for _ in range(1000):  # tasks may start further tasks while they end
+            pending = [t for t in self._tasks if not t.done()]
+            if not pending:
+                break
+            waiter = asyncio.gather(*pending, return_exceptions=True)
+            try:
+                self.run_until_complete(asyncio.wait_for(waiter, max(deadline - self.time(), 0.0)))
+            except (asyncio.TimeoutError, asyncio.CancelledError):  # a read that never ends: cancel it
+                for t in pending:
+                    t.cancel()
+                with contextlib.suppress(BaseException):
+                    self.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
+                break
+        for t in list(self._tasks):  # mark every exception retrieved (gather did it for those it awaited)
+            if t.done() and not t.cancelled():
+                t.exception()
+        with contextlib.suppress(Exception):
+            self.run_until_complete(self.shutdown_asyncgens())
+        with contextlib.suppress(Exception):
+            self.run_until_complete(self.shutdown_default_executor())
+
+    def close(self) -> None:
+        if not self.is_running() and not self.is_closed():
+            with contextlib.suppress(Exception):
+                self._settle()
+        super().close()
+
+
+class _SettlingPolicy(asyncio.DefaultEventLoopPolicy):
+    def new_event_loop(self):
+        return _SettlingLoop()
+
+
+@contextlib.contextmanager
+def settled_event_loops():
+    """Within this context every new asyncio event loop (orbax creates one per restore/save) lets its pending
+    tasks end and retrieves their exceptions before it closes (:class:`_SettlingLoop`): a failed restore leaves
+    no pending read behind whose collection would print tracebacks at a random later moment.
+
+    Scoped: the previous event loop policy is put back at the end (reentrant: an inner context does nothing).
+    Only the default policy is replaced (another one, e.g. uvloop's, is left alone).
+    """
+    previous = asyncio.get_event_loop_policy()
+    if type(previous) is not asyncio.DefaultEventLoopPolicy:
+        yield
+        return
+    asyncio.set_event_loop_policy(_SettlingPolicy())
+    try:
+        yield
+    finally:
+        if isinstance(asyncio.get_event_loop_policy(), _SettlingPolicy):
+            asyncio.set_event_loop_policy(previous)

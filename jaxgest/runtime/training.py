@@ -8,6 +8,11 @@ Every model (TGST autoencoder, TGST transformer, ZEGGS) trains through :func:`tr
 * checkpoints are :class:`jaxgest.runtime.checkpoint.Checkpointer` (orbax, with a stored and checked model config;
   re-exported here with the workdir format checks);
 * ``workdir/metrics.jsonl`` gets one JSON line per log step and ``workdir/config.json`` the config;
+* SIGINT / SIGTERM (Ctrl-C, a batch scheduler's or a preemptible machine's notice) finish the current step,
+  save a checkpoint of that step and stop with :class:`~jaxgest.runtime.errors.Interrupted` (the command line prints its
+  one line, e.g. ``runs/a: tgst transformer interrupted by SIGTERM at step 137; checkpoint saved at step 137
+  (run the same command to resume)``, and exits 130 / 143); a second signal exits at once, keeping the previous
+  checkpoint (:func:`stop_on_signals`). Processes of a multi-process run agree on the step to save;
 * a non-finite loss stops training with :class:`~jaxgest.runtime.errors.TrainingError`, keeping the last good
   checkpoint (nothing is saved after the bad step). Metrics are checked at every log or checkpoint step,
   and the parameters before every save (a NaN gradient with a still-finite loss is caught there), e.g.
@@ -24,6 +29,9 @@ import json
 import math
 import os
 import pathlib
+import signal
+import sys
+import threading
 import time
 from typing import Any, Callable, Mapping, Optional
 
@@ -34,7 +42,7 @@ from flax.training.train_state import TrainState  # noqa: F401  (re-exported: th
 from jaxgest.runtime.checkpoint import Checkpointer, all_finite, strict_checkpoints, warn  # noqa: F401  (re-exported)
 from jaxgest.runtime.workdir_format import (FORMAT_VERSION, MODELS, check_workdir_config,  # noqa: F401  (re-exported)
                                     config_diff)
-from jaxgest.runtime.errors import TrainingError, WriteError
+from jaxgest.runtime.errors import Interrupted, TrainingError, WriteError
 from jaxgest.runtime.io import write_error, write_json_atomic  # noqa: F401  (write_json_atomic re-exported)
 
 __all__ = [
@@ -45,6 +53,8 @@ __all__ = [
     "Checkpointer",
     "MetricsLogger",
     "train_loop",
+    "stop_on_signals",
+    "StopRequest",
     "config_diff",
     "write_json_atomic",
     "FORMAT_VERSION",
@@ -169,6 +179,102 @@ def check_steps(**counts) -> None:
             raise TrainingError(f"{name} must be >= 0, got {value}")
 
 
+class StopRequest:
+    """What :func:`stop_on_signals` yields: the first stop signal received (``signum``, None until one is) and,
+    for the message of a second one, what is being done (``doing``, set by the training loop)."""
+
+    def __init__(self):
+        self.signum: Optional[int] = None
+        self.doing: str = ""
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.signum).name if self.signum is not None else ""
+
+
+def _second_signal_line(request: StopRequest, signum: int) -> str:
+    doing = f" {request.doing}" if request.doing else ""
+    return (f"jaxgest: {signal.Signals(signum).name} again{doing}: stopped at once; the previous checkpoint "
+            "is kept (an unfinished save is removed by the next run)\n")
+
+
+@contextlib.contextmanager
+def stop_on_signals(signals=(signal.SIGINT, signal.SIGTERM)):
+    """Within this context the first of ``signals`` only records itself in the yielded :class:`StopRequest`
+    (the training loop checks it after every step, saves and stops); a second one writes one line to stderr
+    and ends the process at once with status 128 + its number (``os._exit``: no cleanup, so a save in progress
+    is abandoned and orbax's atomic rename never happens -- the previous checkpoint stays the latest).
+
+    The previous handlers are put back at the end. Outside the main thread (signals cannot be handled there),
+    a signal that is ignored (``SIG_IGN``, e.g. SIGINT of a background job) and a handler installed outside
+    Python (JAX's preemption notifier of a multi-process run owns SIGTERM; see :func:`_agreed_stop`) are
+    left alone.
+    """
+    request = StopRequest()
+    if threading.current_thread() is not threading.main_thread():
+        yield request
+        return
+
+    def handler(signum, frame):
+        if request.signum is None:
+            request.signum = signum
+            return
+        try:
+            sys.__stderr__.write(_second_signal_line(request, signum))
+            sys.__stderr__.flush()
+        finally:
+            os._exit(128 + signum)
+
+    previous = {}
+    try:
+        for s in signals:
+            old = signal.getsignal(s)
+            if old is signal.SIG_IGN or old is None:  # ignored, or owned by non-Python code
+                continue
+            previous[s] = signal.signal(s, handler)
+        yield request
+    finally:
+        for s, old in previous.items():
+            signal.signal(s, old)
+
+
+def _stop_signals() -> tuple:
+    """SIGINT and SIGTERM, except SIGTERM in a multi-process run whose JAX preemption notifier handles it (a
+    handler installed by C++ code, which Python's ``signal.getsignal`` does not see): the notice then reaches
+    the loop through :func:`_agreed_stop`."""
+    if jax.process_count() > 1:
+        try:
+            from jax._src import distributed
+
+            if getattr(distributed.global_state, "preemption_sync_manager", None) is not None:
+                return (signal.SIGINT,)
+        except ImportError:
+            pass
+    return (signal.SIGINT, signal.SIGTERM)
+
+
+def _agreed_stop(request: StopRequest, step: int) -> Optional[int]:
+    """The signal to stop at ``step`` on, agreed by every process (None: go on).
+
+    One process: the signal it received. Several (``jax.distributed``): every process sees the same answer at
+    the same step -- a signal any process received (a tiny all-gather of the flags each step), or JAX's
+    preemption sync point (:func:`jax.experimental.multihost_utils.reached_preemption_sync_point`: when JAX's
+    notifier owns SIGTERM, every process reaches it at the same step after any of them was notified).
+    """
+    if jax.process_count() == 1:
+        return request.signum
+    from jax.experimental import multihost_utils
+
+    flags = np.asarray(multihost_utils.process_allgather(np.int32(request.signum or 0)))
+    received = [int(f) for f in np.ravel(flags) if f]
+    if received:
+        return min(received)
+    with contextlib.suppress(Exception):  # no preemption sync manager (not initialised by jax.distributed)
+        if multihost_utils.reached_preemption_sync_point(step):
+            return int(signal.SIGTERM)
+    return None
+
+
 def train_loop(
     state,
     step_fn: Callable,
@@ -199,30 +305,53 @@ def train_loop(
     bar = tqdm(total=num_steps, initial=start, desc=desc, disable=not progress, dynamic_ncols=True, leave=False)
     last_log_time = time.perf_counter()
     metrics = {}
-    for i in range(start, num_steps):
-        batch = batch_fn(i)
-        state, metrics = step_fn(state, batch, key)
-        step = i + 1
-        at_log = step % log_every == 0 or step == num_steps
-        at_ckpt = checkpointer is not None and (step % ckpt_every == 0 or step == num_steps)
-        if at_log or at_ckpt:
-            host = {k: float(np.asarray(jax.device_get(v))) for k, v in metrics.items()}
-            _check_finite(step, host, desc, checkpointer)
-            if at_log:
-                now = time.perf_counter()
-                host["steps_per_s"] = log_every / max(now - last_log_time, 1e-9) if step > start + 1 else 0.0
-                last_log_time = now
-                if logger is not None:
-                    try:
-                        logger.log(step, host)
-                    except WriteError as e:
-                        raise WriteError(f"{e}; stopped at step {step}, {_kept(checkpointer)}") from None
-                if on_log is not None:
-                    on_log(step, host)
-                bar.set_postfix({k: f"{v:.4g}" for k, v in host.items() if k == "loss"})
-            if at_ckpt:
-                _check_params(step, state.params, desc, checkpointer)
-                checkpointer.save(state)
-        bar.update(1)
+    with stop_on_signals(_stop_signals()) as request:
+        for i in range(start, num_steps):
+            batch = batch_fn(i)
+            state, metrics = step_fn(state, batch, key)
+            step = i + 1
+            at_log = step % log_every == 0 or step == num_steps
+            at_ckpt = checkpointer is not None and (step % ckpt_every == 0 or step == num_steps)
+            if at_log or at_ckpt:
+                host = {k: float(np.asarray(jax.device_get(v))) for k, v in metrics.items()}
+                _check_finite(step, host, desc, checkpointer)
+                if at_log:
+                    now = time.perf_counter()
+                    host["steps_per_s"] = log_every / max(now - last_log_time, 1e-9) if step > start + 1 else 0.0
+                    last_log_time = now
+                    if logger is not None:
+                        try:
+                            logger.log(step, host)
+                        except WriteError as e:
+                            raise WriteError(f"{e}; stopped at step {step}, {_kept(checkpointer)}") from None
+                    if on_log is not None:
+                        on_log(step, host)
+                    bar.set_postfix({k: f"{v:.4g}" for k, v in host.items() if k == "loss"})
+                if at_ckpt:
+                    request.doing = f"during the checkpoint save of step {step}"
+                    _check_params(step, state.params, desc, checkpointer)
+                    checkpointer.save(state)
+                    request.doing = ""
+            bar.update(1)
+            signum = _agreed_stop(request, step)
+            if signum is not None:
+                bar.close()
+                _stop(state, step, signum, desc, checkpointer, request, saved=at_ckpt)
     bar.close()
     return state
+
+
+def _stop(state, step: int, signum: int, desc: str, checkpointer, request: StopRequest, saved: bool):
+    """Save ``state`` (at ``step``) unless it was just saved, then raise :class:`Interrupted`."""
+    name = signal.Signals(signum).name
+    if checkpointer is None:
+        raise Interrupted(f"{desc} interrupted by {name} at step {step}; no checkpoint is written by this "
+                          "run", signum)
+    if not saved:
+        _check_params(step, state.params, desc, checkpointer)  # nothing non-finite is saved
+        request.doing = f"during the checkpoint save of step {step}"
+        checkpointer.save(state)
+        request.doing = ""
+    raise Interrupted(f"{checkpointer.workdir}: {desc} interrupted by {name} at step {step}; checkpoint saved "
+                      f"at step {step} (run the same command to resume)", signum)
+

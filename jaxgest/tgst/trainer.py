@@ -7,7 +7,8 @@ in :mod:`jaxgest.tgst.workdir`; config.json stores the effective :class:`~jaxges
 
 Both stages use optax Adam (§3.5), one jit-compiled step each (:func:`jaxgest.runtime.training.jit_config_step`,
 state donated, batch split over the devices) and :func:`jaxgest.runtime.training.train_loop` (NaN stop, tqdm,
-checkpoints). A run resumes from the latest checkpoint of each stage; a finished autoencoder is not
+checkpoints, a checkpoint of the interrupted step on SIGINT/SIGTERM). A training holds the workdir's writer lock
+(:mod:`jaxgest.runtime.workdir_lock`: a second writer is refused). A run resumes from the latest checkpoint of each stage; a finished autoencoder is not
 retrained. The transformer's checkpoint records the autoencoder step it was trained on: when the autoencoder
 has trained further, that transformer is moved aside (:func:`jaxgest.tgst.workdir.set_aside_stale_transformer`)
 and retrained.
@@ -27,6 +28,7 @@ import jax.numpy as jnp
 import optax
 
 from jaxgest.runtime import parallel, training
+from jaxgest.runtime.workdir_lock import exclusive_workdir
 from jaxgest.runtime.training import bare_state, jit_config_step
 from jaxgest.runtime.config import apply_overrides as override_config
 from jaxgest.runtime.errors import DataError, JaxgestError
@@ -151,65 +153,66 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     cfg = tdata.fit_windows(cfg0, body_data)
     _check_batch(cfg.train.autoencoder.batch_size, mesh, "autoencoder")
     _check_batch(cfg.train.transformer.batch_size, mesh, "transformer")
-    workdir.mkdir(parents=True, exist_ok=True)
+    with exclusive_workdir(workdir, primary=jax.process_index() == 0):  # one writer per workdir
+        workdir.mkdir(parents=True, exist_ok=True)
 
-    # Check both stages' checkpoints before writing anything (another model must not load silently).
-    ae_ckpt = ae_checkpointer(workdir, cfg.model)
-    check_existing(ae_ckpt)
-    stored_transformer = stored_transformer_meta(workdir, cfg.model, check=True)  # all but the AE step
-    config_json = {"model": MODEL, "format_version": training.FORMAT_VERSION, "preset": preset,
-                   "config": cfg.to_dict(), "data": str(pathlib.Path(data_dir)),
-                   "data_summary": tdata.describe(body_data, cfg), "seed": int(seed), **info,
-                   "skeleton": tdata.BODY_SIGNATURE}
-    if jax.process_index() == 0:
-        training.write_json_atomic(workdir / "config.json", config_json)
+        # Check both stages' checkpoints before writing anything (another model must not load silently).
+        ae_ckpt = ae_checkpointer(workdir, cfg.model)
+        check_existing(ae_ckpt)
+        stored_transformer = stored_transformer_meta(workdir, cfg.model, check=True)  # all but the AE step
+        config_json = {"model": MODEL, "format_version": training.FORMAT_VERSION, "preset": preset,
+                       "config": cfg.to_dict(), "data": str(pathlib.Path(data_dir)),
+                       "data_summary": tdata.describe(body_data, cfg), "seed": int(seed), **info,
+                       "skeleton": tdata.BODY_SIGNATURE}
+        if jax.process_index() == 0:
+            training.write_json_atomic(workdir / "config.json", config_json)
 
-    key = jax.random.key(seed)
-    params0 = jax.jit(init_params, static_argnames="cfg")(cfg=cfg.model, key=key)
-    if cfg.model.autoencoder.standardize:  # frozen data statistics (a restored checkpoint brings its own)
-        stats = tdata.channel_stats(body_data)
-        params0 = dict(params0, autoencoder=dict(params0["autoencoder"], **{k: jnp.asarray(v)
-                                                                           for k, v in stats.items()}))
-    if cfg.model.autoencoder.linear_path and cfg.train.autoencoder.pca_init:  # start at the block PCA
-        copies = 2 if cfg.train.autoencoder.mirror else 1
-        params0 = dict(params0, autoencoder=autoencoder.init_linear_path(
-            params0["autoencoder"], cfg.model.autoencoder, (body_data.upper + body_data.mirrored_upper)[
-                :copies * len(body_data.upper)], (body_data.lower + body_data.mirrored_lower)[
-                :copies * len(body_data.lower)], velocity_weight=cfg.train.autoencoder.init_velocity_weight))
-    summary = {"workdir": str(workdir), "preset": preset, "devices": info["devices"],
-               "windows": {"ae": cfg.train.autoencoder.window, "transformer": cfg.train.transformer.window}}
+        key = jax.random.key(seed)
+        params0 = jax.jit(init_params, static_argnames="cfg")(cfg=cfg.model, key=key)
+        if cfg.model.autoencoder.standardize:  # frozen data statistics (a restored checkpoint brings its own)
+            stats = tdata.channel_stats(body_data)
+            params0 = dict(params0, autoencoder=dict(params0["autoencoder"], **{k: jnp.asarray(v)
+                                                                               for k, v in stats.items()}))
+        if cfg.model.autoencoder.linear_path and cfg.train.autoencoder.pca_init:  # start at the block PCA
+            copies = 2 if cfg.train.autoencoder.mirror else 1
+            params0 = dict(params0, autoencoder=autoencoder.init_linear_path(
+                params0["autoencoder"], cfg.model.autoencoder, (body_data.upper + body_data.mirrored_upper)[
+                    :copies * len(body_data.upper)], (body_data.lower + body_data.mirrored_lower)[
+                    :copies * len(body_data.lower)], velocity_weight=cfg.train.autoencoder.init_velocity_weight))
+        summary = {"workdir": str(workdir), "preset": preset, "devices": info["devices"],
+                   "windows": {"ae": cfg.train.autoencoder.window, "transformer": cfg.train.transformer.window}}
 
-    # ---- stage 1: autoencoder
-    ae_step_fn = jit_config_step(_ae_step, mesh, cfg)
-    ae_state = parallel.replicate(
-        bare_state(_int32_step(create_ae_state(cfg, params0["autoencoder"], ae_optimizer(cfg)))), mesh)
-    ae_state = ae_ckpt.restore(ae_state)
-    ae_logger = training.MetricsLogger(workdir, extra={"stage": "autoencoder", **info})
-    last = {}
-    ae_state, summary["ae"] = _run_stage(
-        ae_state, ae_step_fn, lambda i: tdata.ae_batch(body_data, cfg, seed, i), mesh,
-        key=key, num_steps=ae_steps, checkpointer=ae_ckpt, logger=ae_logger, desc="tgst autoencoder",
-        progress=progress, log_every=log_every, ckpt_every=ckpt_every, last=last)
-    ae_done = int(jax.device_get(ae_state.step))
-    ae_params = parallel.replicate(jax.device_get(ae_state.params), mesh)
-    ae_ckpt.close()
+        # ---- stage 1: autoencoder
+        ae_step_fn = jit_config_step(_ae_step, mesh, cfg)
+        ae_state = parallel.replicate(
+            bare_state(_int32_step(create_ae_state(cfg, params0["autoencoder"], ae_optimizer(cfg)))), mesh)
+        ae_state = ae_ckpt.restore(ae_state)
+        ae_logger = training.MetricsLogger(workdir, extra={"stage": "autoencoder", **info})
+        last = {}
+        ae_state, summary["ae"] = _run_stage(
+            ae_state, ae_step_fn, lambda i: tdata.ae_batch(body_data, cfg, seed, i), mesh,
+            key=key, num_steps=ae_steps, checkpointer=ae_ckpt, logger=ae_logger, desc="tgst autoencoder",
+            progress=progress, log_every=log_every, ckpt_every=ckpt_every, last=last)
+        ae_done = int(jax.device_get(ae_state.step))
+        ae_params = parallel.replicate(jax.device_get(ae_state.params), mesh)
+        ae_ckpt.close()
 
-    # ---- stage 2: transformer (autoencoder frozen, a step argument)
-    summary["stale_transformer"] = set_aside_stale_transformer(workdir, stored_transformer, ae_done)
-    tr_ckpt = transformer_checkpointer(workdir, cfg.model, ae_done)
-    tr_step_fn = jit_config_step(_transformer_step, mesh, cfg, extra_args=1)
-    tr_state = create_transformer_state(cfg, params0["transformer"], transformer_optimizer(cfg))
-    tr_state = parallel.replicate(bare_state(_int32_step(tr_state)), mesh)
-    tr_state = tr_ckpt.restore(tr_state)
-    tr_logger = training.MetricsLogger(workdir, extra={"stage": "transformer", **info})
-    tr_state, summary["transformer"] = _run_stage(
-        tr_state, lambda st, b, k: tr_step_fn(st, b, k, ae_params),
-        lambda i: tdata.transformer_batch(body_data, cfg, seed, i), mesh, key=key,
-        num_steps=transformer_steps, checkpointer=tr_ckpt, logger=tr_logger, desc="tgst transformer",
-        progress=progress, log_every=log_every, ckpt_every=ckpt_every, last={})
-    tr_ckpt.close()
-    summary["wall_s"] = time.perf_counter() - t0
-    return summary
+        # ---- stage 2: transformer (autoencoder frozen, a step argument)
+        summary["stale_transformer"] = set_aside_stale_transformer(workdir, stored_transformer, ae_done)
+        tr_ckpt = transformer_checkpointer(workdir, cfg.model, ae_done)
+        tr_step_fn = jit_config_step(_transformer_step, mesh, cfg, extra_args=1)
+        tr_state = create_transformer_state(cfg, params0["transformer"], transformer_optimizer(cfg))
+        tr_state = parallel.replicate(bare_state(_int32_step(tr_state)), mesh)
+        tr_state = tr_ckpt.restore(tr_state)
+        tr_logger = training.MetricsLogger(workdir, extra={"stage": "transformer", **info})
+        tr_state, summary["transformer"] = _run_stage(
+            tr_state, lambda st, b, k: tr_step_fn(st, b, k, ae_params),
+            lambda i: tdata.transformer_batch(body_data, cfg, seed, i), mesh, key=key,
+            num_steps=transformer_steps, checkpointer=tr_ckpt, logger=tr_logger, desc="tgst transformer",
+            progress=progress, log_every=log_every, ckpt_every=ckpt_every, last={})
+        tr_ckpt.close()
+        summary["wall_s"] = time.perf_counter() - t0
+        return summary
 
 
 def _run_stage(state, step_fn, batch_fn, mesh, *, key, num_steps, checkpointer, logger, desc, progress,

@@ -4,7 +4,9 @@
 speech/pose sequences (mirrored, ±10 % speed), fits and saves the normalisation statistics, then runs the
 jit-compiled RAdam step (data-parallel over ``devices``) with orbax checkpoints and ``metrics.jsonl``.
 A killed run resumes from the last checkpoint with the same data order (batches are a pure function of
-``(seed, step)``) and ends with the parameters of an uninterrupted run. The data folder is given by the
+``(seed, step)``) and ends with the parameters of an uninterrupted run; SIGINT/SIGTERM save a checkpoint of the
+interrupted step first (:func:`jaxgest.runtime.training.train_loop`). A training holds the workdir's writer lock
+(:mod:`jaxgest.runtime.workdir_lock`: a second writer is refused). The data folder is given by the
 caller (the CLI chooses the built-in synthetic data when none is named).
 
 The workdir's files are described in :mod:`jaxgest.zeggs.workdir`; a resumed run must request the same
@@ -35,6 +37,7 @@ from jaxgest.zeggs import workdir as wd
 from jaxgest.zeggs.config import Config, preset as get_preset
 from jaxgest.zeggs.model import init_params
 from jaxgest.zeggs.steps import make_optimizer, make_train_step, pose_stats as stats_arrays
+from jaxgest.runtime.workdir_lock import exclusive_workdir
 
 
 #: fields set from the training data's rig, never by an override
@@ -74,69 +77,70 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
         raise JaxgestError("zeggs train: no data folder given")
     t0 = time.perf_counter()
     workdir = pathlib.Path(workdir)
-    workdir.mkdir(parents=True, exist_ok=True)
-    clips = [c for c in load_folder(data_dir, progress=progress) if c.audio is not None]
-    if not clips:
-        raise DataError(f"{data_dir}: no clip has audio (ZeroEGGS needs BVH + WAV pairs)")
-    skeleton = clips[0].motion.skeleton
-    cfg = config_for(preset, skeleton, overrides)
-    model, tcfg = cfg.model, cfg.train
-    steps = int(steps if steps is not None else tcfg.steps)
+    with exclusive_workdir(workdir, primary=jax.process_index() == 0):  # one writer per workdir
+        workdir.mkdir(parents=True, exist_ok=True)
+        clips = [c for c in load_folder(data_dir, progress=progress) if c.audio is not None]
+        if not clips:
+            raise DataError(f"{data_dir}: no clip has audio (ZeroEGGS needs BVH + WAV pairs)")
+        skeleton = clips[0].motion.skeleton
+        cfg = config_for(preset, skeleton, overrides)
+        model, tcfg = cfg.model, cfg.train
+        steps = int(steps if steps is not None else tcfg.steps)
 
-    stats_paths = workdir / wd.POSE_STATS, workdir / wd.SPEECH_STATS
-    resume = all(p.is_file() for p in stats_paths)
-    pose_stats = NormStats.load(stats_paths[0]) if resume else None
-    speech_stats = NormStats.load(stats_paths[1]) if resume else None
-    a = tcfg.speed_augmentation
-    data = zdata.build(clips, fps=model.fps, mirror=tcfg.mirror, speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,),
-                       pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=model.loudness,
-                       input_norm=model.input_norm)
-    if data.pose_dim != model.pose_dim:
-        raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {model.pose_dim}")
+        stats_paths = workdir / wd.POSE_STATS, workdir / wd.SPEECH_STATS
+        resume = all(p.is_file() for p in stats_paths)
+        pose_stats = NormStats.load(stats_paths[0]) if resume else None
+        speech_stats = NormStats.load(stats_paths[1]) if resume else None
+        a = tcfg.speed_augmentation
+        data = zdata.build(clips, fps=model.fps, mirror=tcfg.mirror, speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,),
+                           pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=model.loudness,
+                           input_norm=model.input_norm)
+        if data.pose_dim != model.pose_dim:
+            raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {model.pose_dim}")
 
-    mesh = parallel.make_mesh(devices)
-    info = parallel.device_info(mesh)
-    if tcfg.batch_size % mesh.size:  # before any file of the workdir is written
-        ok = [n for n in range(1, tcfg.batch_size + 1) if tcfg.batch_size % n == 0]
-        raise JaxgestError(f"zeggs batch size {tcfg.batch_size} does not divide over {mesh.size} devices; use "
-                           f"--devices with one of {', '.join(map(str, ok))}")
-    ckpt = wd.open_checkpoints(workdir, cfg, skeleton.signature())
-    wd.check_resumable(ckpt)  # refuse a mismatching workdir before touching any of its files
-    if jax.process_index() == 0:
-        if not resume:
-            data.pose_stats.save(stats_paths[0])
-            data.speech_stats.save(stats_paths[1])
-        ref = clips[0].motion
-        bvh.save(ref.replace(rotations=ref.rotations[:2], translations=ref.translations[:2]),
-                 workdir / wd.REFERENCE)
-        wd.write_config(workdir, cfg, preset=preset, steps=steps, seed=seed, data=data_dir, skeleton=skeleton,
-                        info=info)
+        mesh = parallel.make_mesh(devices)
+        info = parallel.device_info(mesh)
+        if tcfg.batch_size % mesh.size:  # before any file of the workdir is written
+            ok = [n for n in range(1, tcfg.batch_size + 1) if tcfg.batch_size % n == 0]
+            raise JaxgestError(f"zeggs batch size {tcfg.batch_size} does not divide over {mesh.size} devices; use "
+                               f"--devices with one of {', '.join(map(str, ok))}")
+        ckpt = wd.open_checkpoints(workdir, cfg, skeleton.signature())
+        wd.check_resumable(ckpt)  # refuse a mismatching workdir before touching any of its files
+        if jax.process_index() == 0:
+            if not resume:
+                data.pose_stats.save(stats_paths[0])
+                data.speech_stats.save(stats_paths[1])
+            ref = clips[0].motion
+            bvh.save(ref.replace(rotations=ref.rotations[:2], translations=ref.translations[:2]),
+                     workdir / wd.REFERENCE)
+            wd.write_config(workdir, cfg, preset=preset, steps=steps, seed=seed, data=data_dir, skeleton=skeleton,
+                            info=info)
 
-    params = init_params(model, jax.random.key(seed))
-    state = TrainState.create(apply_fn=None, params=params, tx=make_optimizer(cfg))
-    state = parallel.replicate(bare_state(state.replace(step=jnp.asarray(0, jnp.int32))), mesh)
-    state = ckpt.restore(state)
-    start = int(jax.device_get(state.step))
-    stats = parallel.replicate(stats_arrays(model, data.pose_stats.mean, data.pose_stats.std), mesh)
-    jitted = jit_config_step(_train_step, mesh, cfg, extra_args=1, compiler_options=tcfg.compiler_options)
+        params = init_params(model, jax.random.key(seed))
+        state = TrainState.create(apply_fn=None, params=params, tx=make_optimizer(cfg))
+        state = parallel.replicate(bare_state(state.replace(step=jnp.asarray(0, jnp.int32))), mesh)
+        state = ckpt.restore(state)
+        start = int(jax.device_get(state.step))
+        stats = parallel.replicate(stats_arrays(model, data.pose_stats.mean, data.pose_stats.std), mesh)
+        jitted = jit_config_step(_train_step, mesh, cfg, extra_args=1, compiler_options=tcfg.compiler_options)
 
-    def step_fn(state, batch, key):
-        return jitted(state, batch, key, stats)
+        def step_fn(state, batch, key):
+            return jitted(state, batch, key, stats)
 
-    def batch_fn(i):
-        return data.batch(i, seed=seed, batch=tcfg.batch_size, window=tcfg.window,
-                          style_min=tcfg.style_window_min, style_max=tcfg.style_window_max,
-                          sampling=tcfg.style_sampling)
+        def batch_fn(i):
+            return data.batch(i, seed=seed, batch=tcfg.batch_size, window=tcfg.window,
+                              style_min=tcfg.style_window_min, style_max=tcfg.style_window_max,
+                              sampling=tcfg.style_sampling)
 
-    batches = parallel.sharded_batch_fn(batch_fn, mesh)
-    logger = MetricsLogger(workdir, extra={"stage": wd.KIND, **info})
-    last = {}
-    state = train_loop(state, step_fn, batches, key=jax.random.key(seed + 1), num_steps=steps,
-                       checkpointer=ckpt, logger=logger, log_every=log_every,
-                       ckpt_every=ckpt_every if ckpt_every is not None else max(50, steps // 10), desc="zeggs",
-                       progress=progress,
-                       on_log=lambda s, m: last.update(m))
-    ckpt.close()
-    wall = time.perf_counter() - t0
-    return {"steps": steps, "start_step": start, "wall_s": wall, "final": last, "devices": info["devices"],
-            "sequences": len(data.sequences), "pose_dim": data.pose_dim}
+        batches = parallel.sharded_batch_fn(batch_fn, mesh)
+        logger = MetricsLogger(workdir, extra={"stage": wd.KIND, **info})
+        last = {}
+        state = train_loop(state, step_fn, batches, key=jax.random.key(seed + 1), num_steps=steps,
+                           checkpointer=ckpt, logger=logger, log_every=log_every,
+                           ckpt_every=ckpt_every if ckpt_every is not None else max(50, steps // 10), desc="zeggs",
+                           progress=progress,
+                           on_log=lambda s, m: last.update(m))
+        ckpt.close()
+        wall = time.perf_counter() - t0
+        return {"steps": steps, "start_step": start, "wall_s": wall, "final": last, "devices": info["devices"],
+                "sequences": len(data.sequences), "pose_dim": data.pose_dim}

@@ -175,7 +175,7 @@ def compact_zeggs_report(rep: dict) -> dict:
                                       for name, v in pp[part].items() if name in ("trained", "random_init",
                                                                                    "raw_statistics")}
                                for part in ("style", "content")}
-        out["probe_pooled"]["datasets"] = pp.get("datasets")
+        out["probe_pooled"]["datasets"] = [pathlib.Path(d).name for d in pp.get("datasets") or ()]
     return out
 
 

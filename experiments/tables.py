@@ -235,15 +235,16 @@ def block(name: str, quick: bool) -> str | None:
     if results is None:
         return None
     readme_dir = (ROOT / TABLES[name].readme).parent
-    srcs = ", ".join(f"[`{pathlib.Path(r['_path']).name}`]({pathlib.Path(r['_path']).relative_to(readme_dir)})"
+    srcs = ",\n".join(f"[`{pathlib.Path(r['_path']).name}`]({pathlib.Path(r['_path']).relative_to(readme_dir)})"
                      for r in results)
     commits = sorted({(r["_stamp"]["commit"] or "unknown")[:10] + ("+dirty" if r["_stamp"]["dirty"] else "")
                       for r in results})
     walls = ", ".join(f"{r['wall_s'] / 60:.0f} min" if r["wall_s"] >= 120 else f"{r['wall_s']:.0f} s"
                       for r in results)
-    label = "QUICK SMOKE RUN (tiny step counts, not a result)" if quick else "driver output"
-    tail = (f"\n\n*{label}: from {srcs}; commit {', '.join(commits)}; wall {walls} on 2 shared cores; "
-            + "; ".join(dict.fromkeys(f"`{r['_stamp']['command']}`" for r in results)) + "*")
+    label = "Quick smoke run (tiny step counts; not a result)" if quick else "Driver output"
+    tail = (f"\n\n{label}; wall {walls} on 2 shared cores; commit {', '.join(commits)}; results\n{srcs};\nregenerate with:\n\n"
+            + "\n".join(dict.fromkeys(f"    {r['_stamp']['command']}" for r in results))
+            + f"\n    python -m experiments table {name}{' --quick' if quick else ''}")
     return (f"<!-- table:{name}{':quick' if quick else ''} -->\n{TABLES[name].render(results)}{tail}\n"
             "<!-- /table -->")
 

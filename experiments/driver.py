@@ -31,6 +31,10 @@ REPO = ROOT.parent
 TGST_METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")
 
 
+class DriverError(Exception):
+    """A bad config, a missing data folder or results file: one line, exit status 2."""
+
+
 def shared_data() -> pathlib.Path:
     """The shared data folder: ``$JAXGEST_SHARED/data``, else ``../shared/data`` beside the clone."""
     return pathlib.Path(os.environ.get("JAXGEST_SHARED", REPO.parent / "shared")) / "data"
@@ -50,14 +54,14 @@ def load_config(path, quick: bool = False) -> dict:
     try:
         cfg = tomllib.loads(path.read_text())
     except FileNotFoundError:
-        raise SystemExit(f"experiments: {path}: no such config") from None
+        raise DriverError(f"{path}: no such config") from None
     except tomllib.TOMLDecodeError as e:
-        raise SystemExit(f"experiments: {path}: not valid TOML ({e})") from None
+        raise DriverError(f"{path}: not valid TOML ({e})") from None
     for key in ("model", "preset", "seeds", "table"):
         if key not in cfg:
-            raise SystemExit(f"experiments: {path}: missing field {key!r}")
+            raise DriverError(f"{path}: missing field {key!r}")
     if cfg["model"] not in ("tgst", "zeggs"):
-        raise SystemExit(f"experiments: {path}: model must be 'tgst' or 'zeggs', got {cfg['model']!r}")
+        raise DriverError(f"{path}: model must be 'tgst' or 'zeggs', got {cfg['model']!r}")
     quick_part = cfg.pop("quick", {})
     cfg = copy.deepcopy(cfg)
     if quick:
@@ -88,7 +92,7 @@ def split_folder(source: pathlib.Path, dest: pathlib.Path, heldout: list, want_h
         if (content in heldout) == want_heldout and not (dest / f.name).exists():
             (dest / f.name).symlink_to(f.resolve())
     if not any(dest.glob("*.bvh")):
-        raise SystemExit(f"experiments: {source}: no clips for this split (heldout {heldout})")
+        raise DriverError(f"{source}: no clips for this split (heldout {heldout})")
     return dest
 
 
@@ -116,7 +120,7 @@ def run_tgst(cfg: dict, log) -> dict:
     data, tr, pr = cfg["data"], cfg.get("train", {}), cfg.get("protocol", {})
     source = shared_data() / data["dataset"]
     if not source.is_dir():
-        raise SystemExit(f"experiments: {source}: no such data folder (set JAXGEST_SHARED)")
+        raise DriverError(f"{source}: no such data folder (set JAXGEST_SHARED)")
     heldout = list(data.get("heldout_contents", []))
     base = ROOT / cfg["experiment"] / "out" / "data"
     train_dir = split_folder(source, base / "train", heldout, False) if heldout else source
@@ -251,14 +255,28 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     from experiments import tables
 
+    from jaxgest.errors import JaxgestError
+
     if a.cmd == "run":
-        return run(a.configs, a.quick)
+        try:
+            return run(a.configs, a.quick)
+        except (DriverError, JaxgestError) as e:  # bad config or data, a full disk: one line, as the CLI does
+            print(f"experiments: {e}", file=sys.stderr)
+            return 2
     if a.cmd == "list":
         for c in sorted(ROOT.glob("*/configs/*.toml")):
             print(c.relative_to(REPO))
         for name in tables.TABLES:
             print("table", name)
         return 0
+    try:
+        return _tables(a, tables)
+    except (DriverError, JaxgestError) as e:
+        print(f"experiments: {e}", file=sys.stderr)
+        return 2
+
+
+def _tables(a, tables) -> int:
     if a.check:
         bad = tables.check()
         for line in bad:

@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from experiments.driver import REPO, ROOT, load_config, results_path
+from experiments.driver import REPO, ROOT, DriverError, load_config, results_path
 
 METHOD_LABELS = {"soft": "soft", "hard": "hard", "avatarnet": "Avatar-net", "adain": "AdaIN",
                  "autoencoder": "round trip", "content_as_is": "content as is", "style_as_is": "style as is"}
@@ -98,7 +98,8 @@ def render_tables23(results: list) -> str:
     if sw:
         def rng(k):
             v = [s[k] for s in sw if k in s]
-            return f"{min(v):.2f}-{max(v):.2f}"
+            lo, hi = f"{min(v):.2f}", f"{max(v):.2f}"
+            return lo if lo == hi else f"{lo}-{hi}"
         lines.append(f"Soft-swap weights: largest {rng('max_weight')}, effective tokens {rng('effective_tokens')}, "
                      f"argmax within ±1 of its own index {rng('argmax_within_1')} (chance {rng('chance_within_1')}).")
     return "\n".join(lines)
@@ -235,16 +236,29 @@ def block(name: str, quick: bool) -> str | None:
     if results is None:
         return None
     readme_dir = (ROOT / TABLES[name].readme).parent
-    srcs = ",\n".join(f"[`{pathlib.Path(r['_path']).name}`]({pathlib.Path(r['_path']).relative_to(readme_dir)})"
-                     for r in results)
+    links = [f"[`{pathlib.Path(r['_path']).name}`]({pathlib.Path(r['_path']).relative_to(readme_dir)})" for r in results]
     commits = sorted({(r["_stamp"]["commit"] or "unknown")[:10] + ("+dirty" if r["_stamp"]["dirty"] else "")
                       for r in results})
     walls = ", ".join(f"{r['wall_s'] / 60:.0f} min" if r["wall_s"] >= 120 else f"{r['wall_s']:.0f} s"
                       for r in results)
     label = "Quick smoke run (tiny step counts; not a result)" if quick else "Driver output"
-    tail = (f"\n\n{label}; wall {walls} on 2 shared cores; commit {', '.join(commits)}; results\n{srcs};\nregenerate with:\n\n"
-            + "\n".join(dict.fromkeys(f"    {r['_stamp']['command']}" for r in results))
-            + f"\n    python -m experiments table {name}{' --quick' if quick else ''}")
+    words = f"{label}; wall {walls} on 2 shared cores; commit {', '.join(commits)}; results {', '.join(links)}.".split(" ")
+    lines, line = [], ""
+    for w in words:  # wrap at 110 characters: no README line over 200
+        if line and len(line) + 1 + len(w) > 110:
+            lines.append(line)
+            line = w
+        else:
+            line = f"{line} {w}" if line else w
+    lines.append(line)
+    paths = [pathlib.Path(r["_stamp"]["config"]["path"]) for r in results]
+    if len(paths) > 1 and len({p.parent for p in paths}) == 1:
+        run_args = f"{paths[0].parent}/{{{','.join(p.stem for p in paths)}}}.toml"
+    else:
+        run_args = " ".join(str(p) for p in paths)
+    flag = " --quick" if quick else ""
+    tail = ("\n\n" + "\n".join(lines) + "\n\n"
+            f"    python -m experiments run {run_args}{flag}\n    python -m experiments table {name}{flag}")
     return (f"<!-- table:{name}{':quick' if quick else ''} -->\n{TABLES[name].render(results)}{tail}\n"
             "<!-- /table -->")
 
@@ -277,7 +291,7 @@ def update(names, quick: bool = False) -> int:
     names = names or list(TABLES)
     for name in names:
         if name not in TABLES:
-            raise SystemExit(f"experiments: unknown table {name} (python -m experiments list)")
+            raise DriverError(f"unknown table {name} (python -m experiments list)")
         new = block(name, quick)
         if new is None:
             print(f"{name}: results missing (run its configs: {', '.join(TABLES[name].configs)})")

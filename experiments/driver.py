@@ -96,6 +96,25 @@ def split_folder(source: pathlib.Path, dest: pathlib.Path, heldout: list, want_h
     return dest
 
 
+def reuse_autoencoder(cfg: dict, source: str, seed: int, wd: pathlib.Path) -> None:
+    """Copy the autoencoder checkpoint of config ``source`` (same experiment, same seed, same quick mode) into
+    ``wd`` before training, as training the same autoencoder config with the same seed would give it
+    bit-identically; the run then trains only the transformer."""
+    import shutil
+
+    src_cfg = {**cfg, "name": source}
+    step = cfg["train"]["ae_steps"]
+    src = out_dir(src_cfg) / f"s{seed}" / "checkpoints" / "autoencoder" / str(step)
+    dest = wd / "checkpoints" / "autoencoder" / str(step)
+    if dest.is_dir():
+        return
+    if not src.is_dir():
+        raise DriverError(f"{src}: no autoencoder checkpoint to reuse; run configs/{source}.toml "
+                          f"{'--quick ' if cfg['quick'] else ''}first")
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copytree(src, dest)
+
+
 def compact_tgst_report(rep: dict) -> dict:
     """The numbers the tables use from a ``jaxgest.tgst.evaluate`` report: per method and control the
     averaged statistics, per pair the mean errors, the swap diagnostics, protocol and timing."""
@@ -129,6 +148,8 @@ def run_tgst(cfg: dict, log) -> dict:
     out = {"seeds": {}}
     for seed in cfg["seeds"]:
         wd = out_dir(cfg) / f"s{seed}"
+        if tr.get("autoencoder_from"):
+            reuse_autoencoder(cfg, tr["autoencoder_from"], seed, wd)
         t0 = time.perf_counter()
         summary = train(str(train_dir), str(wd), preset=cfg["preset"], ae_steps=tr.get("ae_steps"),
                         transformer_steps=tr.get("transformer_steps"), seed=seed, progress=False,

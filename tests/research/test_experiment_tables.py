@@ -88,8 +88,19 @@ def test_a_bad_config_is_one_line(tmp_path):
     (tmp_path / "configs").mkdir()
     bad = tmp_path / "configs" / "bad.toml"
     bad.write_text('model = "gan"\npreset = "x"\nseeds = [0]\ntable = []\n')
-    with pytest.raises(SystemExit, match="model must be 'tgst' or 'zeggs'"):
+    with pytest.raises(driver.DriverError, match="model must be 'tgst' or 'zeggs'"):
         driver.load_config(bad)
     bad.write_text("model = [\n")
-    with pytest.raises(SystemExit, match="not valid TOML"):
+    with pytest.raises(driver.DriverError, match="not valid TOML"):
         driver.load_config(bad)
+
+
+def test_readmes_stay_an_index():
+    """The root README at most 200 lines, each experiment README at most 150, no README line over 200 characters."""
+    root = EXPERIMENTS.parent / "README.md"
+    assert len(root.read_text().splitlines()) <= 200
+    for readme in sorted(EXPERIMENTS.glob("*/README.md")):
+        assert len(readme.read_text().splitlines()) <= 150, readme
+    for readme in [root, EXPERIMENTS / "README.md", *sorted(EXPERIMENTS.glob("*/README.md"))]:
+        long = [i + 1 for i, line in enumerate(readme.read_text().splitlines()) if len(line) > 200]
+        assert not long, f"{readme}: lines {long} over 200 characters"

@@ -78,16 +78,18 @@ def render_tables23(results: list) -> str:
                     cell += f" ± {np.std(v):.3f}"
                 cells.append(cell)
             lines.append(f"| {group} ({unit}), {pairs} | " + " | ".join(cells) + " |")
+    cols = [(g, p) for g in ("style", "content") for p in first]
     lines += ["", "Soft swap minus X, per pair (seeds averaged per pair; mean ± standard error over pairs; "
               "pairs where soft is lower):", "",
-              "| X | " + " | ".join(f"style, {p}" for p in first) + " |", "|---|" + "---|" * len(first)]
-    for other in [n for n in names if n not in ("soft", "autoencoder", "style_as_is")]:
+              "| X | " + " | ".join(f"{g}, {p}" for g, p in cols) + " |", "|---|" + "---|" * len(cols)]
+    for other in [n for n in names if n not in ("soft", "autoencoder")]:
         cells = []
-        for pairs in first:
-            a, b = _tgst_pair_means(res, pairs, "soft", "style"), _tgst_pair_means(res, pairs, other, "style")
+        for group, pairs in cols:
+            a, b = _tgst_pair_means(res, pairs, "soft", group), _tgst_pair_means(res, pairs, other, group)
             keys = sorted(set(a) & set(b))
             d = [a[k] - b[k] for k in keys]
-            cells.append(f"{_pm(d)} ({sum(x < 0 for x in d)}/{len(d)})" if d else "-")
+            cells.append(f"{_pm(d)} ({sum(x < 0 for x in d)}/{len(d)})" if d and other != "content_as_is"
+                         or d and group == "style" else "-")
         lines.append(f"| {METHOD_LABELS[other]} | " + " | ".join(cells) + " |")
     per_seed = {p: [s - h for s, h in zip(_tgst_seed_means(res, p, "soft", "style"),
                                          _tgst_seed_means(res, p, "hard", "style"))] for p in first}

@@ -1,0 +1,5 @@
+"""``python -m experiments ...``: see :mod:`experiments.driver`."""
+
+from experiments.driver import main
+
+raise SystemExit(main())

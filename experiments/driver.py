@@ -1,0 +1,306 @@
+"""The experiment driver: a config file in, a stamped results file out.
+
+    python -m experiments run CONFIG... [--quick]     train (resumes), evaluate, write results/<config>[.quick].json
+    python -m experiments table NAME [--quick]         rewrite the README tables NAME from their results files
+    python -m experiments table --check                 exit 1 when a README table differs from its results
+    python -m experiments list                         configs and tables
+
+A config is a TOML file in ``experiments/<experiment>/configs/`` (fields: experiments/README.md). Training and
+evaluation call the package's public functions (``jaxgest.tgst.trainer.train``, ``jaxgest.tgst.evaluate``,
+``jaxgest.zeggs.trainer.train``, ``jaxgest.zeggs.evaluate``) with the config's preset and dotted overrides, in one
+process per ``run`` so the seeds of a config share compiled programs. Workdirs go to
+``experiments/<experiment>/out/<config>[.quick]/s<seed>`` (git-ignored; a rerun resumes from their checkpoints);
+the results file is written with :func:`jaxgest.runtime.provenance.write_results` (commit, version, resolved config,
+command) to ``experiments/<experiment>/results/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import pathlib
+import shlex
+import sys
+import time
+import tomllib
+
+ROOT = pathlib.Path(__file__).resolve().parent
+REPO = ROOT.parent
+TGST_METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")
+
+
+class DriverError(Exception):
+    """A bad config, a missing data folder or results file: one line, exit status 2."""
+
+
+def shared_data() -> pathlib.Path:
+    """The shared data folder: ``$JAXGEST_SHARED/data``, else ``../shared/data`` beside the clone."""
+    return pathlib.Path(os.environ.get("JAXGEST_SHARED", REPO.parent / "shared")) / "data"
+
+
+def set_dotted(d: dict, key: str, value) -> None:
+    *path, last = key.split(".")
+    for p in path:
+        d = d.setdefault(p, {})
+    d[last] = value
+
+
+def load_config(path, quick: bool = False) -> dict:
+    """A config file as a dict, with its ``[quick]`` replacements applied when ``quick`` (keys are dotted
+    paths into the config, e.g. ``"train.steps" = 20``), plus ``name``, ``experiment`` and ``path``."""
+    path = pathlib.Path(path).resolve()
+    try:
+        cfg = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise DriverError(f"{path}: no such config") from None
+    except tomllib.TOMLDecodeError as e:
+        raise DriverError(f"{path}: not valid TOML ({e})") from None
+    for key in ("model", "preset", "seeds", "table"):
+        if key not in cfg:
+            raise DriverError(f"{path}: missing field {key!r}")
+    if cfg["model"] not in ("tgst", "zeggs"):
+        raise DriverError(f"{path}: model must be 'tgst' or 'zeggs', got {cfg['model']!r}")
+    quick_part = cfg.pop("quick", {})
+    cfg = copy.deepcopy(cfg)
+    if quick:
+        for k, v in quick_part.items():
+            set_dotted(cfg, k, v)
+    cfg.update(name=path.stem, experiment=path.parent.parent.name, quick=quick,
+               path=str(path.relative_to(REPO)) if path.is_relative_to(REPO) else str(path))
+    return cfg
+
+
+def results_path(cfg: dict) -> pathlib.Path:
+    return ROOT / cfg["experiment"] / "results" / (cfg["name"] + (".quick" if cfg["quick"] else "") + ".json")
+
+
+def out_dir(cfg: dict) -> pathlib.Path:
+    return ROOT / cfg["experiment"] / "out" / (cfg["name"] + (".quick" if cfg["quick"] else ""))
+
+
+# ---------------------------------------------------------------------------------------------------- TGST
+
+
+def split_folder(source: pathlib.Path, dest: pathlib.Path, heldout: list, want_heldout: bool) -> pathlib.Path:
+    """A folder of symlinks to the Bandai-Namco files of ``source`` whose content is (not) in ``heldout``."""
+    dest.mkdir(parents=True, exist_ok=True)
+    for f in sorted(source.glob("*.bvh")):
+        parts = f.stem.split("_")
+        content = parts[1] if len(parts) >= 4 else f.stem
+        if (content in heldout) == want_heldout and not (dest / f.name).exists():
+            (dest / f.name).symlink_to(f.resolve())
+    if not any(dest.glob("*.bvh")):
+        raise DriverError(f"{source}: no clips for this split (heldout {heldout})")
+    return dest
+
+
+def reuse_autoencoder(cfg: dict, source: str, seed: int, wd: pathlib.Path) -> None:
+    """Copy the autoencoder checkpoint of config ``source`` (same experiment, same seed, same quick mode) into
+    ``wd`` before training, as training the same autoencoder config with the same seed would give it
+    bit-identically; the run then trains only the transformer."""
+    import shutil
+
+    src_cfg = {**cfg, "name": source}
+    step = cfg["train"]["ae_steps"]
+    src = out_dir(src_cfg) / f"s{seed}" / "checkpoints" / "autoencoder" / str(step)
+    dest = wd / "checkpoints" / "autoencoder" / str(step)
+    if dest.is_dir():
+        return
+    if not src.is_dir():
+        raise DriverError(f"{src}: no autoencoder checkpoint to reuse; run configs/{source}.toml "
+                          f"{'--quick ' if cfg['quick'] else ''}first")
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copytree(src, dest)
+
+
+def compact_tgst_report(rep: dict) -> dict:
+    """The numbers the tables use from a ``jaxgest.tgst.evaluate`` report: per method and control the
+    averaged statistics, per pair the mean errors, the swap diagnostics, protocol and timing."""
+    def means(d):
+        return {m: {g: e[g]["mean"] for g in ("content", "style", "gt_content", "gt_style") if g in e}
+                for m, e in (d or {}).items() if e and "skipped" not in e}
+
+    return {
+        "pairs": rep["pairs"], "num_pairs": rep["num_pairs"], "protocol": rep["protocol"],
+        "methods": rep["methods"], "controls": rep.get("controls"), "swap_diagnostics": rep.get("swap_diagnostics"),
+        "timing": rep.get("timing"),
+        "per_pair": [{"content": pathlib.Path(p["content"]).name, "style": pathlib.Path(p["style"]).name,
+                      "errors": means(p.get("errors")), "controls": means(p.get("controls"))}
+                     for p in rep["per_pair"]],
+    }
+
+
+def run_tgst(cfg: dict, log) -> dict:
+    from jaxgest.tgst.evaluate import evaluate, metric_validity
+    from jaxgest.tgst.trainer import train
+
+    data, tr, pr = cfg["data"], cfg.get("train", {}), cfg.get("protocol", {})
+    source = shared_data() / data["dataset"]
+    if not source.is_dir():
+        raise DriverError(f"{source}: no such data folder (set JAXGEST_SHARED)")
+    heldout = list(data.get("heldout_contents", []))
+    base = ROOT / cfg["experiment"] / "out" / "data"
+    train_dir = split_folder(source, base / "train", heldout, False) if heldout else source
+    eval_dir = split_folder(source, base / "eval", heldout, True) if heldout else source
+    methods = tuple(pr.get("methods", TGST_METHODS))
+    out = {"seeds": {}}
+    for seed in cfg["seeds"]:
+        wd = out_dir(cfg) / f"s{seed}"
+        if tr.get("autoencoder_from"):
+            reuse_autoencoder(cfg, tr["autoencoder_from"], seed, wd)
+        t0 = time.perf_counter()
+        summary = train(str(train_dir), str(wd), preset=cfg["preset"], ae_steps=tr.get("ae_steps"),
+                        transformer_steps=tr.get("transformer_steps"), seed=seed, progress=False,
+                        log_every=tr.get("log_every", 50), ckpt_every=tr.get("ckpt_every", 500),
+                        ablate=tuple(tr.get("ablate", ())), overrides=dict(cfg.get("overrides", {})))
+        t_train = time.perf_counter() - t0
+        log(f"seed {seed}: trained in {t_train:.0f} s")
+        per = {"train": {k: summary.get(k) for k in ("ae", "transformer", "devices")}, "eval": {},
+               "wall_s": {"train": round(t_train, 1)}}
+        for pairs in pr.get("pairs", ["intra", "inter"]):
+            t0 = time.perf_counter()
+            rep = evaluate(str(wd), str(eval_dir), pairs=pairs, methods=methods, progress=False,
+                           protocol=pr.get("protocol", "authors"), trim_seconds=pr.get("trim"),
+                           max_pairs=pr.get("max_pairs"), bucket=pr.get("bucket", 1.25))
+            per["eval"][pairs] = compact_tgst_report(rep)
+            per["wall_s"][f"eval_{pairs}"] = round(time.perf_counter() - t0, 1)
+            log(f"seed {seed}: {pairs} pairs evaluated in {per['wall_s'][f'eval_{pairs}']:.0f} s")
+        out["seeds"][str(seed)] = per
+    if pr.get("validity"):  # Table 1: model-free, once per config
+        out["metric_validity"] = metric_validity(str(eval_dir), pairs="inter", trim_seconds=pr.get("trim"),
+                                                 progress=False)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------- ZeroEGGS
+
+
+def synthetic_folder(cfg: dict, seed: int) -> pathlib.Path:
+    """The built-in synthetic dataset of script seed ``seed`` (written once per experiment and length)."""
+    from jaxgest.motion.synthetic import write_dataset
+
+    seconds = cfg["data"].get("seconds", 10.0)
+    dest = ROOT / cfg["experiment"] / "out" / "data" / f"synth_{seconds:g}s_seed{seed}"
+    if not (dest / "manifest.csv").is_file():
+        write_dataset(dest, seed=seed, seconds=seconds, progress=False)
+    return dest
+
+
+def compact_zeggs_report(rep: dict) -> dict:
+    keep = {"probe": ("style", "content", "chance", "styles"), "leakage": ("mean_loss", "contrasts", "clips")}
+    out = {k: v for k, v in rep.items() if k not in keep and k != "probe_pooled"}
+    for k, fields in keep.items():
+        if rep.get(k):
+            out[k] = {f: rep[k][f] for f in fields if f in rep[k]}
+    if "probe_pooled" in rep:
+        pp = rep["probe_pooled"]
+        out["probe_pooled"] = {part: {name: (v.get("accuracy") if isinstance(v, dict) else v)
+                                      for name, v in pp[part].items() if name in ("trained", "random_init",
+                                                                                   "raw_statistics")}
+                               for part in ("style", "content")}
+        out["probe_pooled"]["datasets"] = [pathlib.Path(d).name for d in pp.get("datasets") or ()]
+    return out
+
+
+def run_zeggs(cfg: dict, log) -> dict:
+    from jaxgest.zeggs.evaluate import evaluate
+    from jaxgest.zeggs.trainer import train
+
+    data, tr, pr = cfg["data"], cfg.get("train", {}), cfg.get("protocol", {})
+    train_data = synthetic_folder(cfg, data.get("train_seed", 0))
+    heldout = synthetic_folder(cfg, data.get("heldout_seed", 1))
+    probe_dirs = [str(synthetic_folder(cfg, k)) for k in range(1, pr.get("probe_datasets", 0) + 1)]
+    out = {"seeds": {}}
+    for seed in cfg["seeds"]:
+        wd = out_dir(cfg) / f"s{seed}"
+        t0 = time.perf_counter()
+        summary = train(str(train_data), str(wd), preset=cfg["preset"], steps=tr.get("steps"), seed=seed,
+                        progress=False, log_every=tr.get("log_every", 50), ckpt_every=tr.get("ckpt_every"),
+                        overrides=dict(cfg.get("overrides", {})))
+        per = {"train": {k: summary.get(k) for k in ("steps", "final", "steps_per_s") if k in summary},
+               "wall_s": {"train": round(time.perf_counter() - t0, 1)}}
+        log(f"seed {seed}: trained in {per['wall_s']['train']:.0f} s")
+        for name, folder, kw in (("training_scripts", train_data, {}), ("heldout_scripts", heldout, {}),
+                                 ("pooled", train_data, {"probe_data": probe_dirs, "generation": False})):
+            if name == "pooled" and not probe_dirs:
+                continue
+            t0 = time.perf_counter()
+            rep = evaluate(str(wd), str(folder), seed=pr.get("eval_seed", 0), progress=False,
+                           max_clips=pr.get("max_clips"), **kw)
+            per[name] = compact_zeggs_report(rep)
+            per["wall_s"][name] = round(time.perf_counter() - t0, 1)
+            log(f"seed {seed}: {name} evaluated in {per['wall_s'][name]:.0f} s")
+        out["seeds"][str(seed)] = per
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------- commands
+
+
+def run(paths, quick: bool) -> int:
+    from jaxgest.runtime.provenance import write_results
+
+    for p in paths:
+        cfg = load_config(p, quick)
+        t0 = time.perf_counter()
+
+        def log(msg, _name=cfg["name"]):
+            print(f"[{_name}{' quick' if quick else ''} {time.perf_counter() - t0:6.0f} s] {msg}", flush=True)
+
+        results = (run_tgst if cfg["model"] == "tgst" else run_zeggs)(cfg, log)
+        results["wall_s"] = round(time.perf_counter() - t0, 1)
+        first = out_dir(cfg) / f"s{cfg['seeds'][0]}" / "config.json"
+        if first.is_file():  # the model's resolved config (preset + overrides), as training wrote it
+            cfg["resolved"] = json.loads(first.read_text()).get("config")
+        results["quick"] = quick
+        command = ["python", "-m", "experiments", "run", cfg["path"]] + (["--quick"] if quick else [])
+        results_path(cfg).parent.mkdir(parents=True, exist_ok=True)
+        dest = write_results(results_path(cfg), results, cfg, shlex.join(command))
+        log(f"wrote {dest.relative_to(REPO)}")
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m experiments", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="train, evaluate and write the stamped results of each config")
+    r.add_argument("configs", nargs="+")
+    r.add_argument("--quick", action="store_true", help="the config's [quick] replacements (a smoke run)")
+    t = sub.add_parser("table", help="rewrite README tables from their results files")
+    t.add_argument("names", nargs="*", help="table names (default: every table whose results exist)")
+    t.add_argument("--quick", action="store_true", help="the tables of the quick results")
+    t.add_argument("--check", action="store_true", help="change nothing; exit 1 if a README table differs")
+    sub.add_parser("list", help="configs and tables")
+    a = ap.parse_args(argv)
+    from experiments import tables
+
+    from jaxgest.runtime.errors import JaxgestError
+
+    if a.cmd == "run":
+        try:
+            return run(a.configs, a.quick)
+        except (DriverError, JaxgestError) as e:  # bad config or data, a full disk: one line, as the CLI does
+            print(f"experiments: {e}", file=sys.stderr)
+            return 2
+    if a.cmd == "list":
+        for c in sorted(ROOT.glob("*/configs/*.toml")):
+            print(c.relative_to(REPO))
+        for name in tables.TABLES:
+            print("table", name)
+        return 0
+    try:
+        return _tables(a, tables)
+    except (DriverError, JaxgestError) as e:
+        print(f"experiments: {e}", file=sys.stderr)
+        return 2
+
+
+def _tables(a, tables) -> int:
+    if a.check:
+        bad = tables.check()
+        for line in bad:
+            print(line, file=sys.stderr)
+        return 1 if bad else 0
+    return tables.update(a.names, quick=a.quick)

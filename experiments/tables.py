@@ -1,0 +1,310 @@
+"""README tables generated from stamped results files.
+
+A README holds a generated table between ``<!-- table:NAME -->`` and ``<!-- /table -->`` (``NAME:quick`` for the
+table of the ``--quick`` results). :func:`update` rewrites those blocks from the results files; :func:`check`
+lists every block that differs from what its results files give (``tests/research/test_experiment_tables.py``).
+Each table ends with a line naming its results files, their commit and the command that wrote them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+import re
+from typing import Callable
+
+import numpy as np
+
+from experiments.driver import REPO, ROOT, DriverError, load_config, results_path
+
+METHOD_LABELS = {"soft": "soft", "hard": "hard", "avatarnet": "Avatar-net", "adain": "AdaIN",
+                 "autoencoder": "round trip", "content_as_is": "content as is", "style_as_is": "style as is"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Table:
+    readme: str            # README holding the table, relative to experiments/
+    configs: tuple         # config files, relative to experiments/
+    render: Callable       # (list of results dicts, in config order) -> markdown
+
+
+def _mean_se(x) -> tuple[float, float]:
+    x = np.asarray(x, float)
+    return float(x.mean()), float(x.std(ddof=1) / np.sqrt(len(x))) if len(x) > 1 else float("nan")
+
+
+def _pm(x, digits=3) -> str:
+    m, se = _mean_se(x)
+    return f"{m:+.{digits}f} ± {se:.{digits}f}" if np.isfinite(se) else f"{m:+.{digits}f}"
+
+
+def _tgst_pair_means(res: dict, pairs: str, name: str, group: str) -> dict:
+    """{(content, style): value averaged over seeds} of one method or control."""
+    acc: dict = {}
+    for per in res["seeds"].values():
+        for p in per["eval"][pairs]["per_pair"]:
+            e = p["controls" if name in ("content_as_is", "style_as_is") else "errors"].get(name)
+            if e is not None:
+                acc.setdefault((p["content"], p["style"]), []).append(e[group])
+    n = len(res["seeds"])
+    return {k: float(np.mean(v)) for k, v in acc.items() if len(v) == n}
+
+
+def _tgst_seed_means(res: dict, pairs: str, name: str, group: str) -> list:
+    out = []
+    for per in res["seeds"].values():
+        ev = per["eval"][pairs]
+        src = ev["controls"] if name in ("content_as_is", "style_as_is") else ev["methods"]
+        if src and name in src and group in src[name]:
+            out.append(src[name][group]["mean"])
+    return out
+
+
+def render_tables23(results: list) -> str:
+    res = results[0]
+    seeds = len(res["seeds"])
+    first = res["_config"]["protocol"]["pairs"]
+    ev0 = next(iter(res["seeds"].values()))["eval"]
+    names = [m for m in ("soft", "hard", "avatarnet", "adain", "autoencoder")
+             if m in ev0[first[0]]["methods"]] + ["content_as_is", "style_as_is"]
+    lines = ["| | " + " | ".join(METHOD_LABELS[n] for n in names) + " |", "|---|" + "---:|" * len(names)]
+    for group, unit in (("style", "m/s"), ("content", "m")):
+        for pairs in first:
+            cells = []
+            for n in names:
+                v = _tgst_seed_means(res, pairs, n, group)
+                cell = f"{np.mean(v):.3f}" if v else "-"
+                if v and seeds > 1 and n in ("soft", "hard"):
+                    cell += f" ± {np.std(v):.3f}"
+                cells.append(cell)
+            lines.append(f"| {group} ({unit}), {pairs} | " + " | ".join(cells) + " |")
+    cols = [(g, p) for g in ("style", "content") for p in first]
+    lines += ["", "Soft swap minus X, per pair (seeds averaged per pair; mean ± standard error over pairs; "
+              "pairs where soft is lower):", "",
+              "| X | " + " | ".join(f"{g}, {p}" for g, p in cols) + " |", "|---|" + "---|" * len(cols)]
+    for other in [n for n in names if n not in ("soft", "autoencoder")]:
+        cells = []
+        for group, pairs in cols:
+            a, b = _tgst_pair_means(res, pairs, "soft", group), _tgst_pair_means(res, pairs, other, group)
+            keys = sorted(set(a) & set(b))
+            d = [a[k] - b[k] for k in keys]
+            cells.append(f"{_pm(d)} ({sum(x < 0 for x in d)}/{len(d)})" if d and other != "content_as_is"
+                         or d and group == "style" else "-")
+        lines.append(f"| {METHOD_LABELS[other]} | " + " | ".join(cells) + " |")
+    per_seed = {p: [s - h for s, h in zip(_tgst_seed_means(res, p, "soft", "style"),
+                                         _tgst_seed_means(res, p, "hard", "style"))] for p in first}
+    lines += ["", "Soft minus hard style error per seed (m/s): " + "; ".join(
+        f"{p} " + ", ".join(f"{d:+.2f}" for d in v) for p, v in per_seed.items()) + "."]
+    sw = [per["eval"][p]["swap_diagnostics"] for per in res["seeds"].values() for p in first
+          if per["eval"][p].get("swap_diagnostics")]
+    if sw:
+        def rng(k):
+            v = [s[k] for s in sw if k in s]
+            lo, hi = f"{min(v):.2f}", f"{max(v):.2f}"
+            return lo if lo == hi else f"{lo}-{hi}"
+        lines.append(f"Soft-swap weights: largest {rng('max_weight')}, effective tokens {rng('effective_tokens')}, "
+                     f"argmax within ±1 of its own index {rng('argmax_within_1')} (chance {rng('chance_within_1')}).")
+    return "\n".join(lines)
+
+
+def render_validity(results: list) -> str:
+    from jaxgest.tgst.tables import validity_table
+
+    return validity_table(results[0]["metric_validity"])
+
+
+def render_table4(results: list) -> str:
+    base, ablations = results[0], results[1:]
+    lines = ["Change against the full model of the same seed (ablated minus full, soft swap; mean ± standard "
+             "error over seeds; seeds with an increase):", "",
+             "| loss term off | content, intra (m) | content, inter (m) | style, intra (m/s) | style, inter (m/s) |",
+             "|---|---|---|---|---|"]
+    for res in ablations:
+        term = ",".join(res["_config"]["train"]["ablate"])
+        cells = []
+        for group in ("content", "style"):
+            for pairs in ("intra", "inter"):
+                d = [np.mean([e["methods"]["soft"][group]["mean"]]) - base["seeds"][s]["eval"][pairs]["methods"][
+                    "soft"][group]["mean"] for s, per in res["seeds"].items() if s in base["seeds"]
+                     for e in [per["eval"][pairs]]]
+                cells.append(f"{_pm(d)} ({sum(x > 0 for x in d)}/{len(d)})" if d else "-")
+        lines.append(f"| L_{term} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def render_variants(results: list) -> str:
+    lines = ["| config | seeds | soft style, intra | hard style, intra | soft style, inter | hard style, inter | "
+             "soft content, intra | soft - content as is, style intra |", "|---|---:|---|---|---|---|---|---|"]
+    for res in results:
+        cells = []
+        for name, pairs, group in (("soft", "intra", "style"), ("hard", "intra", "style"), ("soft", "inter", "style"),
+                                   ("hard", "inter", "style"), ("soft", "intra", "content")):
+            v = _tgst_seed_means(res, pairs, name, group)
+            cells.append(f"{np.mean(v):.3f} ± {np.std(v):.3f}")
+        a, b = _tgst_pair_means(res, "intra", "soft", "style"), _tgst_pair_means(res, "intra", "content_as_is", "style")
+        cells.append(_pm([a[k] - b[k] for k in sorted(set(a) & set(b))]))
+        lines.append(f"| `{res['_config']['name']}` | {len(res['seeds'])} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def render_buckets(results: list) -> str:
+    exact, bucket = results
+    ex, bu = exact["seeds"]["0"]["eval"]["intra"], bucket["seeds"]["0"]["eval"]["intra"]
+    lines = [f"Intra pairs, {ex['num_pairs']} evaluated; bucketed minus exact shapes, per pair (mean ± standard "
+             "error):", "", "| method | content, exact (m) | content diff | style, exact (m/s) | style diff |",
+             "|---|---:|---|---:|---|"]
+    for m in ex["methods"]:
+        cells = []
+        for group in ("content", "style"):
+            a = {(p["content"], p["style"]): p["errors"][m][group] for p in ex["per_pair"] if m in p["errors"]}
+            b = {(p["content"], p["style"]): p["errors"][m][group] for p in bu["per_pair"] if m in p["errors"]}
+            keys = sorted(set(a) & set(b))
+            cells += [f"{np.mean([a[k] for k in keys]):.3f}", _pm([b[k] - a[k] for k in keys])]
+        lines.append(f"| {METHOD_LABELS.get(m, m)} | " + " | ".join(cells) + " |")
+    t = [r["seeds"]["0"]["wall_s"]["eval_intra"] for r in (exact, bucket)]
+    lines.append(f"\nEvaluation wall time (incl. compilation, shared cores): exact {t[0]:.0f} s, bucketed {t[1]:.0f} s.")
+    return "\n".join(lines)
+
+
+def render_zeggs(results: list) -> str:
+    lines = ["| config | seed | style probe (pooled) | raw statistics | random init | held-out leakage z | "
+             "Fréchet / floor, training scripts | held-out | held-out BeatAlign - shuffled (z) |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+
+    def fr(rep):
+        f = rep["frechet_distance"]
+        return f["generated_vs_real"] / f["real_train_vs_real_test"]
+
+    for res in results:
+        cols = {k: [] for k in ("probe", "leak", "fr_t", "fr_h", "beat")}
+        for seed, per in res["seeds"].items():
+            pp = per.get("pooled", {}).get("probe_pooled", {}).get("style", {})
+            h = per["heldout_scripts"]
+            b = h["beat_alignment"]["generated_vs_control"]
+            leak = h["leakage"]["contrasts"]["other_style - same_style_other_content"]["z"]
+            cols["probe"].append(pp.get("trained", np.nan))
+            cols["leak"].append(leak)
+            cols["fr_t"].append(fr(per["training_scripts"]))
+            cols["fr_h"].append(fr(h))
+            cols["beat"].append(b["mean"])
+            lines.append(f"| `{res['_config']['name']}` | {seed} | {pp.get('trained', np.nan):.3f} | "
+                         f"{pp.get('raw_statistics', np.nan):.3f} | {pp.get('random_init', np.nan):.3f} | {leak:.1f} | "
+                         f"{fr(per['training_scripts']):.2f}x | {fr(h):.2f}x | "
+                         f"{b['mean']:+.3f} ± {b['standard_error']:.3f} ({b['mean'] / b['standard_error']:.1f}) |")
+        if len(res["seeds"]) > 1:
+            lines.append(f"| `{res['_config']['name']}` | mean | {np.mean(cols['probe']):.3f} | | | "
+                         f"{np.mean(cols['leak']):.1f} | {np.mean(cols['fr_t']):.2f}x | {np.mean(cols['fr_h']):.2f}x | "
+                         f"{_pm(cols['beat'])} over seeds |")
+    return "\n".join(lines)
+
+
+TABLES = {
+    "tgst_bandai.tables23": Table("tgst_bandai/README.md", ("tgst_bandai/configs/fit_motion.toml",), render_tables23),
+    "tgst_bandai.validity": Table("tgst_bandai/README.md", ("tgst_bandai/configs/fit_motion.toml",), render_validity),
+    "tgst_bandai.table4": Table("tgst_bandai/README.md", ("tgst_bandai/configs/fit_motion.toml",) + tuple(
+        f"tgst_bandai/configs/ablate_{t}.toml" for t in ("identity", "cyclic", "structure", "appearance")),
+        render_table4),
+    "tgst_bandai.variants": Table("tgst_bandai/README.md", tuple(
+        f"tgst_bandai/configs/{c}.toml" for c in ("fit", "fit_pca", "fit_smooth", "fit_motion")), render_variants),
+    "tgst_evaluation.buckets": Table("tgst_evaluation/README.md", ("tgst_evaluation/configs/exact40.toml",
+                                                                    "tgst_evaluation/configs/bucket40.toml"),
+                                     render_buckets),
+    "zeggs_synthetic.headline": Table("zeggs_synthetic/README.md", ("zeggs_synthetic/configs/small_paper_pose.toml",
+                                                                    "zeggs_synthetic/configs/small.toml"), render_zeggs),
+}
+
+MARKER = re.compile(r"<!-- table:(?P<name>[\w.]+)(?P<quick>:quick)? -->\n.*?<!-- /table -->", re.S)
+
+
+def load_results(name: str, quick: bool) -> list | None:
+    """The results of a table's configs (each with its resolved config under ``_config`` and its stamp under
+    ``_stamp``), or None when one is missing."""
+    from jaxgest.runtime.provenance import read_results
+
+    out = []
+    for c in TABLES[name].configs:
+        path = results_path(load_config(ROOT / c, quick))
+        if not path.is_file():
+            return None
+        obj = read_results(path)
+        out.append({**obj["results"], "_config": obj["stamp"]["config"], "_stamp": obj["stamp"],
+                    "_path": path})
+    return out
+
+
+def block(name: str, quick: bool) -> str | None:
+    """The marked block of table ``name``: the table and a line naming its results files, commit and command."""
+    results = load_results(name, quick)
+    if results is None:
+        return None
+    readme_dir = (ROOT / TABLES[name].readme).parent
+    links = [f"[`{pathlib.Path(r['_path']).name}`]({pathlib.Path(r['_path']).relative_to(readme_dir)})" for r in results]
+    commits = sorted({(r["_stamp"]["commit"] or "unknown")[:10] + ("+dirty" if r["_stamp"]["dirty"] else "")
+                      for r in results})
+    walls = ", ".join(f"{r['wall_s'] / 60:.0f} min" if r["wall_s"] >= 120 else f"{r['wall_s']:.0f} s"
+                      for r in results)
+    label = "Quick smoke run (tiny step counts; not a result)" if quick else "Driver output"
+    words = f"{label}; wall {walls} on 2 shared cores; commit {', '.join(commits)}; results {', '.join(links)}.".split(" ")
+    lines, line = [], ""
+    for w in words:  # wrap at 110 characters: no README line over 200
+        if line and len(line) + 1 + len(w) > 110:
+            lines.append(line)
+            line = w
+        else:
+            line = f"{line} {w}" if line else w
+    lines.append(line)
+    paths = [pathlib.Path(r["_stamp"]["config"]["path"]) for r in results]
+    if len(paths) > 1 and len({p.parent for p in paths}) == 1:
+        run_args = f"{paths[0].parent}/{{{','.join(p.stem for p in paths)}}}.toml"
+    else:
+        run_args = " ".join(str(p) for p in paths)
+    flag = " --quick" if quick else ""
+    tail = ("\n\n" + "\n".join(lines) + "\n\n"
+            f"    python -m experiments run {run_args}{flag}\n    python -m experiments table {name}{flag}")
+    return (f"<!-- table:{name}{':quick' if quick else ''} -->\n{TABLES[name].render(results)}{tail}\n"
+            "<!-- /table -->")
+
+
+def _readmes() -> list[pathlib.Path]:
+    return sorted(ROOT.glob("*/README.md")) + [ROOT / "README.md", REPO / "README.md"]
+
+
+def check() -> list[str]:
+    """One line per README table that differs from its results files (or whose results are missing)."""
+    bad = []
+    for readme in _readmes():
+        if not readme.is_file():
+            continue
+        for m in MARKER.finditer(readme.read_text()):
+            name, quick = m["name"], bool(m["quick"])
+            if name not in TABLES:
+                bad.append(f"{readme}: unknown table {name}")
+                continue
+            want = block(name, quick)
+            if want is None:
+                bad.append(f"{readme}: table {name}{':quick' if quick else ''} has no results files")
+            elif want != m.group(0):
+                bad.append(f"{readme}: table {name}{':quick' if quick else ''} differs from its results "
+                           f"(regenerate: python -m experiments table {name}{' --quick' if quick else ''})")
+    return bad
+
+
+def update(names, quick: bool = False) -> int:
+    names = names or list(TABLES)
+    for name in names:
+        if name not in TABLES:
+            raise DriverError(f"unknown table {name} (python -m experiments list)")
+        new = block(name, quick)
+        if new is None:
+            print(f"{name}: results missing (run its configs: {', '.join(TABLES[name].configs)})")
+            continue
+        readme = ROOT / TABLES[name].readme
+        text = readme.read_text()
+        tag = f"<!-- table:{name}{':quick' if quick else ''} -->"
+        if tag in text:
+            text = MARKER.sub(lambda m: new if m.group(0).startswith(tag + "\n") else m.group(0), text)
+        else:
+            text = text.rstrip("\n") + "\n\n" + new + "\n"
+        readme.write_text(text)
+        print(f"{name}{' (quick)' if quick else ''}: written to {readme.relative_to(REPO)}")
+    return 0

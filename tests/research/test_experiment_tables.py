@@ -1,0 +1,106 @@
+"""Every README table the experiment driver generates matches its stamped results files, and every config loads.
+
+A README table sits between ``<!-- table:NAME -->`` and ``<!-- /table -->``; ``python -m experiments table NAME``
+writes it from the results files of its configs (see experiments/README.md).
+"""
+
+import copy
+import pathlib
+
+import pytest
+
+from experiments import driver, tables
+
+EXPERIMENTS = pathlib.Path(driver.__file__).parent
+CONFIGS = sorted(EXPERIMENTS.glob("*/configs/*.toml"))
+
+
+def _marked_tables():
+    return [(readme, m["name"], bool(m["quick"])) for readme in tables._readmes() if readme.is_file()
+            for m in tables.MARKER.finditer(readme.read_text())]
+
+
+def test_every_readme_table_matches_its_results():
+    assert tables.check() == []
+
+
+def test_a_changed_result_is_caught(monkeypatch):
+    """Control: perturb one number of the results a marked table is built from; the check must fail."""
+    marked = [m for m in _marked_tables() if m[1] in tables.TABLES and tables.load_results(m[1], m[2])]
+    if not marked:
+        pytest.skip("no generated table with results in any README")
+    readme, name, quick = marked[0]
+    real = tables.load_results
+
+    def perturbed(n, q):
+        res = real(n, q)
+        if n == name and q == quick:
+            res = copy.deepcopy(res)
+            seed = next(iter(res[-1]["seeds"].values()))
+            for part in seed.get("eval", {}).values():  # tgst: scale every per-pair and averaged error
+                for p in part["per_pair"]:
+                    for e in list(p["errors"].values()) + list(p["controls"].values()):
+                        e.update({k: v * 1.5 for k, v in e.items()})
+                for e in list(part["methods"].values()) + list((part.get("controls") or {}).values()):
+                    for g in ("content", "style"):
+                        if g in e:
+                            e[g] = {k: v * 1.5 for k, v in e[g].items()}
+            if "metric_validity" in res[-1]:
+                res[-1]["metric_validity"]["num_evaluated"] = -1
+            for key in ("training_scripts", "heldout_scripts"):  # zeggs
+                if key in seed:
+                    seed[key]["frechet_distance"]["generated_vs_real"] *= 1.5
+        return res
+
+    monkeypatch.setattr(tables, "load_results", perturbed)
+    assert any(f"table {name}" in line for line in tables.check())
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: f"{p.parent.parent.name}/{p.name}")
+@pytest.mark.parametrize("quick", [False, True])
+def test_config_loads_and_feeds_known_tables(path, quick):
+    cfg = driver.load_config(path, quick)
+    assert cfg["model"] in ("tgst", "zeggs") and cfg["seeds"]
+    for name in cfg["table"]:
+        assert name in tables.TABLES, f"{path}: unknown table {name}"
+    if quick:
+        full = driver.load_config(path, False)
+        assert driver.results_path(cfg) != driver.results_path(full)
+        assert driver.out_dir(cfg) != driver.out_dir(full)
+
+
+def test_tables_name_existing_configs():
+    for name, t in tables.TABLES.items():
+        assert (EXPERIMENTS / t.readme).is_file(), name
+        for c in t.configs:
+            assert (EXPERIMENTS / c).is_file(), f"{name}: {c}"
+
+
+def test_quick_replacements_are_dotted_paths():
+    cfg = {"train": {"steps": 8000}, "seeds": [0, 1]}
+    driver.set_dotted(cfg, "train.steps", 30)
+    driver.set_dotted(cfg, "protocol.max_clips", 6)
+    driver.set_dotted(cfg, "seeds", [0])
+    assert cfg == {"train": {"steps": 30}, "seeds": [0], "protocol": {"max_clips": 6}}
+
+
+def test_a_bad_config_is_one_line(tmp_path):
+    (tmp_path / "configs").mkdir()
+    bad = tmp_path / "configs" / "bad.toml"
+    bad.write_text('model = "gan"\npreset = "x"\nseeds = [0]\ntable = []\n')
+    with pytest.raises(driver.DriverError, match="model must be 'tgst' or 'zeggs'"):
+        driver.load_config(bad)
+    bad.write_text("model = [\n")
+    with pytest.raises(driver.DriverError, match="not valid TOML"):
+        driver.load_config(bad)
+
+
+def test_readmes_stay_an_index():
+    """The root README at most 200 lines, each experiment README at most 150, no README line over 200 characters."""
+    root = EXPERIMENTS.parent / "README.md"
+    assert len(root.read_text().splitlines()) <= 200
+    for readme in sorted(EXPERIMENTS.glob("*/README.md")):
+        assert len(readme.read_text().splitlines()) <= 150, readme
+    for readme in [root, EXPERIMENTS / "README.md", *sorted(EXPERIMENTS.glob("*/README.md"))]:
+        long = [i + 1 for i, line in enumerate(readme.read_text().splitlines()) if len(line) > 200]
+        assert not long, f"{readme}: lines {long} over 200 characters"

@@ -110,8 +110,8 @@ def make_multitake_pairs(clips: Sequence, takes: Sequence[int] = SPLITS["test"],
     when given); for every other style s and every clip e of style s among ``takes``, the pair
     (content, e) in the condition :func:`condition_of` (content label, e's label); ground truth = every clip of
     (content label, s) among ``takes`` other than e. ``exemplar_takes`` (None = all): per (content clip,
-    style, exemplar label) keep that many exemplar takes, rotating with the content clip's position so
-    every take is used. Pairs without a ground-truth take are dropped. Ordered by (content, exemplar) path.
+    style, exemplar label) keep that many exemplar takes, rotating with the content clip's take number so
+    every take is used (and a ``contents`` subset keeps the pairs of the whole set). Pairs without a ground-truth take are dropped. Ordered by (content, exemplar) path.
     References: Kuriyama et al. 2022, §4.3 (intra / inter-scenario); SPEC §5.
     """
     test = sorted(split_by_take(clips, takes), key=lambda c: str(c.path))
@@ -122,7 +122,8 @@ def make_multitake_pairs(clips: Sequence, takes: Sequence[int] = SPLITS["test"],
     styles = sorted({c.style for c in test if c.style != neutral})
     labels = sorted({c.content for c in test})
     pairs = []
-    for k, c in enumerate(heads):
+    for c in heads:
+        k = take_of(c)  # the rotation depends on the clip only, so a content subset keeps its pairs
         for s in styles:
             for label in labels:
                 exemplars = cells.get((label, s), [])
@@ -289,7 +290,8 @@ class _Run:
 
 
 def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[str] = ("soft", "hard", "adain",
-                   "avatarnet"), pca: dict | None = None, oracle_every: int = 1, progress: bool = False) -> dict:
+                   "avatarnet"), pca: dict | None = None, oracle_every: int = 1, variants: Sequence[str] = VARIANTS,
+                   controls: bool = True, progress: bool = False) -> dict:
     """Errors of every method, input variant and control on every :class:`TakePair`.
 
     Returns ``{"protocol", "window", "pairs": [{"condition", "content", "exemplar", "style",
@@ -301,7 +303,9 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
     takes = the take-to-take floor; averaged over the takes; only with >= 2 takes), ``"collage|{variant}"``
     (:func:`collage_bound` of the exemplar's frames, without / with its mirrored frames: content and
     gt_content only). Errors: means (eqs. 13 / 15) under ``protocol`` (default :func:`multitake_protocol`),
-    window :func:`window_frames`. A pair whose content or exemplar is too short is skipped with the reason.
+    window :func:`window_frames`. ``variants`` restricts the input variants; ``controls=False`` leaves out
+    the rows that do not depend on the model (content / style as is, gt_take, collage). A pair whose content
+    or exemplar is too short is skipped with the reason.
     References: Kuriyama et al. 2022, §4.2-4.3, eqs. 13-16; SPEC §5.
     """
     import numpy as np
@@ -314,7 +318,7 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
     proto = protocol or multitake_protocol()
     methods = tuple(methods)
     batched = BatchedTransfer(model, (*methods, "autoencoder"), diagnostics=False)
-    caches, inputs, records, pca_feats = {}, {}, [], {}
+    caches, inputs, records, pca_feats, ae_feats = {}, {}, [], {}, {}
     for index, pair in enumerate(tqdm(pairs, desc="multi-take pairs", unit="pair", disable=not progress)):
         fps = pair.content.motion.fps
         feats = caches.setdefault(fps, FeatureCache(proto, fps))
@@ -343,7 +347,7 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
             except DataError as err:
                 rows[name] = {"skipped": str(err)}
 
-        for variant in VARIANTS:
+        for variant in variants:
             key = (id(pair.exemplar), variant)
             if key not in inputs:
                 inputs[key] = (pair.exemplar, _exemplar_input(pair.exemplar, variant, proto))
@@ -351,8 +355,9 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
             outs, _ = batched.run(_Run(pair.content, style_in))
             for m in methods:
                 score(f"{m}|{variant}", lambda m=m: plain(outs[m]))
-            if variant == "as_is":
-                score("autoencoder", lambda: plain(outs["autoencoder"]))
+            if id(pair.content) not in ae_feats:  # the round trip ignores the style: once per content clip
+                ae_feats[id(pair.content)] = (pair.content, plain(outs["autoencoder"]))
+            score("autoencoder", ae_feats[id(pair.content)][1])
             if oracle_every and index % oracle_every == 0:
                 score(f"oracle_hands|{variant}",
                       lambda: plain(hands_oracle(model, pair.content.motion, style_in.motion)))
@@ -361,6 +366,9 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
             if key not in pca_feats:
                 pca_feats[key] = (pair.content, plain(pca_round_trip(model, pca, pair.content.motion)))
             score("pca16", pca_feats[key][1])
+        if not controls:
+            rec["rows"] = rows
+            continue
         score("content_as_is", c)
         score("style_as_is", lambda: feats(pair.exemplar))
         if len(gts) >= 2:
@@ -401,10 +409,13 @@ def round_trip_speeds(model, clips: Sequence, protocol=None) -> list:
     and of its autoencoder round trip, under ``protocol`` (default :func:`multitake_protocol`)."""
     from jaxgest.tgst.protocol import clip_features
 
+    from jaxgest.tgst.batched import BatchedTransfer
+
     proto = protocol or multitake_protocol()
+    batched = BatchedTransfer(model, ("autoencoder",), diagnostics=False)  # length buckets: few compilations
     out = []
     for c in clips:
-        rt = model.transfer(c.motion, c.motion, method="autoencoder")
+        rt = batched.run(_Run(c, c))[0]["autoencoder"]
         out.append({"clip": str(c.path), "cell": f"{c.content}/{c.style}",
                     "input": arm_speed(clip_features(c.motion, c.motion.fps, proto)[1]),
                     "output": arm_speed(clip_features(rt, c.motion.fps, proto)[1])})

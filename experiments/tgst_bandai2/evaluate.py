@@ -24,8 +24,11 @@ EXEMPLAR_TAKES = 1
 
 
 def _round(x):
+    """Floats to 5 significant digits, clip paths to their file names (results files stay small)."""
     if isinstance(x, float):
         return float(f"{x:.5g}")
+    if isinstance(x, str) and x.endswith(".bvh"):
+        return pathlib.Path(x).name
     if isinstance(x, dict):
         return {k: _round(v) for k, v in x.items()}
     if isinstance(x, list):
@@ -67,6 +70,8 @@ def main() -> int:
         train = [c for c in mt.split_by_take(clips, cfg["train_takes"]) if c.content != held]
         pca = mt.fit_pca(model, train)
         first = cfg["seed"] == 0 and not held  # seed 0 of the full runs: both variants, controls, oracle
+        if not first and not held:  # seeds 1-2 of the full runs: the inter conditions only (CPU time)
+            pairs = [p for p in pairs if p.condition != "intra"]
         report = mt.evaluate_pairs(model, pairs, protocol=proto, pca=pca, progress=True,
                                    oracle_every=4 if first else 0, controls=first,
                                    variants=mt.VARIANTS if first else ("mirror",))

@@ -64,7 +64,7 @@ def paired(controls, runs, cond, a, b, err, contents=None):
                 continue
             ds.append(vb - va)
             per_seed[i].append(vb - va)
-        if len(ds) == len(seeds):
+        if ds:  # seeds that scored the pair (seeds 1-2 of the full runs skip the intra pairs)
             diffs.append((k, float(np.mean(ds))))
     d = np.array([x for _, x in diffs])
     if len(d) < 2:
@@ -78,6 +78,8 @@ def holds(res, sign):
         return "no data"
     m, se, _, per, _ = res
     ok = sign * m > 2 * se and all(sign * x > 0 for x in per)
+    if len(per) < 3:
+        return f"({'beyond 2 SE' if sign * m > 2 * se else 'within 2 SE'}, {len(per)} seed(s): cannot hold)"
     return "**holds**" if ok else "does not hold"
 
 
@@ -125,7 +127,7 @@ def share(controls, runs, cond, control_row, err, contents=None):
         soft = [value(s[k][1], "soft|mirror", err) for s in seeds if k in s]
         soft = [x for x in soft if x is not None]
         ctl, floor = value(rows, control_row, err), value(rows, "gt_take", err)
-        if len(soft) == len(seeds) and ctl is not None and floor is not None:
+        if soft and ctl is not None and floor is not None:
             style = k[1].split("_")[-2]
             items.append((f"{k[0]}|{style}", ctl - np.mean(soft), ctl - floor))
     if len(items) < 3:
@@ -146,26 +148,43 @@ def table1(t1):
     out = ["| condition (style sample's gesture) | triples | content err: content sample / style sample | "
            "content metric holds on | style err: content sample / style sample | style metric holds on |",
            "|---|---:|---:|---:|---:|---:|"]
+    notes = []
+    sp = defaultdict(list)  # log arm speed per content x style cell (all takes)
+    for r in t1["arm_speeds"]:
+        sp[r["cell"]].append(math.log(r["speed"]))
+    cells = {k: np.mean(v) for k, v in sp.items()}
     for cond in ("inter-mirror", "inter-other"):
         x = [q for q in t1["triples"] if q["condition"] == cond]
         c, s = np.array([q["content"] for q in x]), np.array([q["style"] for q in x])
         dc, ds = c[:, 1] - c[:, 0], s[:, 0] - s[:, 1]
+        refs = defaultdict(lambda: [[], []])
+        for q, a, b in zip(x, dc, ds):
+            refs[q["reference"]][0].append(a), refs[q["reference"]][1].append(b)
+        fail_c = np.mean([np.mean(v[0]) <= 0 for v in refs.values()])
+        fail_s = np.mean([np.mean(v[1]) <= 0 for v in refs.values()])
+        notes.append(f"{cond}: the relation fails (mean over the reference's triples) on {fail_c:.0%} of the "
+                     f"{len(refs)} references for the content metric, {fail_s:.0%} for the style metric.")
         out.append(f"| {cond} | {len(x)} | {c[:, 0].mean():.3f} / {c[:, 1].mean():.3f} m "
                    f"(diff {dc.mean():+.3f} +- {dc.std(ddof=1) / math.sqrt(len(dc)):.3f}) | "
                    f"{(dc > 0).sum()}/{len(x)} ({(dc > 0).mean():.0%}) | {s[:, 0].mean():.3f} / {s[:, 1].mean():.3f} m/s "
                    f"(diff {ds.mean():+.3f} +- {ds.std(ddof=1) / math.sqrt(len(ds)):.3f}) | "
                    f"{(ds > 0).sum()}/{len(x)} ({(ds > 0).mean():.0%}) |")
-    # cause: how much of the log arm speed's spread is the gesture's, the style's, the take's
-    sp = defaultdict(list)
-    for r in t1["arm_speeds"]:
-        sp[r["cell"]].append(math.log(r["speed"]))
-    cells = {k: np.mean(v) for k, v in sp.items()}
     within = np.mean([np.var(v, ddof=1) for v in sp.values()])
     gest = lambda c: c.split("/")[0].replace("-left", "").replace("-right", "")
     styles = sorted({k.split("/")[1] for k in cells})
     gestures = sorted({gest(k) for k in cells})
     by_style = np.var([np.mean([v for k, v in cells.items() if k.endswith("/" + s)]) for s in styles], ddof=1)
     by_gesture = np.var([np.mean([v for k, v in cells.items() if gest(k) == g]) for g in gestures], ddof=1)
+    out += [""] + notes
+    cell_of = lambda n: "/".join(n[:-4].split("_")[1:3])
+    for cond in ("inter-mirror", "inter-other"):  # cause: the style metric against the styles' speed gap
+        x = [q for q in t1["triples"] if q["condition"] == cond]
+        gap = np.array([abs(cells[cell_of(q["reference"])] - cells[cell_of(q["content_sample"])]) for q in x])
+        ok = np.array([q["style"][1] < q["style"][0] for q in x])
+        bins = [(0, .3), (.3, .7), (.7, 99)]
+        out.append(f"{cond}, style metric holds by |log arm-speed ratio| of the two styles (cell means): " + "; ".join(
+            f"{lo:g}-{hi if hi < 99 else 'max'}: {ok[(gap >= lo) & (gap < hi)].mean():.0%} of "
+            f"{((gap >= lo) & (gap < hi)).sum()}" for lo, hi in bins) + ".")
     out.append("")
     out.append(f"Log mean arm speed (all 224 clips): variance between styles {by_style:.3f}, between the two "
                f"gestures {by_gesture:.3f}, between takes of one cell {within:.3f}.")

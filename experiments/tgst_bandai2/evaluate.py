@@ -69,7 +69,7 @@ def main() -> int:
         pairs = mt.make_multitake_pairs(clips, exemplar_takes=EXEMPLAR_TAKES, contents=[held] if held else None)
         train = [c for c in mt.split_by_take(clips, cfg["train_takes"]) if c.content != held]
         pca = mt.fit_pca(model, train)
-        first = cfg["seed"] == 0 and not held  # seed 0 of the full runs: both variants, controls, oracle
+        first = cfg["seed"] == 0 and not held and not cfg.get("extra_data")  # full_s0: variants, controls, oracle
         if not first and not held:  # seeds 1-2 of the full runs: the inter conditions only (CPU time)
             pairs = [p for p in pairs if p.condition != "intra"]
         report = mt.evaluate_pairs(model, pairs, protocol=proto, pca=pca, progress=True,

@@ -3,7 +3,9 @@
     python experiments/tgst_bandai2/train.py experiments/tgst_bandai2/configs/full_s0.json [--data DIR]
 
 The training folder ``out/splits/NAME`` holds symlinks to the Bandai-Namco-2 clips of the config's
-``train_takes`` (001-004), without ``hold_out_content`` (zero-shot runs); no data is copied. Resumes when the
+``train_takes`` (001-004), without ``hold_out_content`` (zero-shot runs), plus every clip of the folders in
+``extra_data`` (paths relative to the repository root, e.g. ``../shared/data/bandai-namco-1``); no data is
+copied. Resumes when the
 workdir already holds checkpoints. Writes ``out/runs/NAME/train_summary.json`` (stamped).
 """
 import argparse
@@ -30,6 +32,8 @@ def main() -> int:
     try:
         n = multitake.link_split(a.data, split, takes=cfg["train_takes"],
                                  exclude_contents=[cfg["hold_out_content"]] if cfg["hold_out_content"] else ())
+        for extra in cfg.get("extra_data", []):  # every clip of another dataset (e.g. Bandai-Namco-1)
+            n += multitake.link_split(HERE.parents[1] / extra, split, takes=None, clear=False)
     except DataError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

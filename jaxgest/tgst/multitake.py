@@ -41,10 +41,12 @@ def split_by_take(clips: Sequence, takes: Sequence[int]) -> list:
     return [c for c in clips if take_of(c) in wanted]
 
 
-def link_split(data_dir, out_dir, takes: Sequence[int], exclude_contents: Sequence[str] = ()) -> int:
+def link_split(data_dir, out_dir, takes: Sequence[int] | None, exclude_contents: Sequence[str] = (),
+               clear: bool = True) -> int:
     """Fill ``out_dir`` with symlinks to the BVH files of ``data_dir`` (Bandai-Namco layout) whose take is in
-    ``takes`` and whose content is not in ``exclude_contents``; stale links are removed. Returns the count.
-    DataError when nothing matches or a content to exclude is unknown."""
+    ``takes`` (None: every take) and whose content is not in ``exclude_contents``; stale links are removed
+    first (``clear``; False adds to the folder). Returns the count. DataError when nothing matches or a
+    content to exclude is unknown."""
     from jaxgest.motion import datasets
 
     root = datasets.dataset_root(data_dir)
@@ -54,7 +56,7 @@ def link_split(data_dir, out_dir, takes: Sequence[int], exclude_contents: Sequen
     for p in sorted(root.glob("*.bvh")):
         m = datasets.BANDAI_RE.match(p.name)
         contents.add(m["content"])
-        if int(m["id"]) in {int(t) for t in takes} and m["content"] not in set(exclude_contents):
+        if (takes is None or int(m["id"]) in {int(t) for t in takes}) and m["content"] not in set(exclude_contents):
             chosen.append(p)
     unknown = sorted(set(exclude_contents) - contents)
     if unknown:
@@ -63,7 +65,7 @@ def link_split(data_dir, out_dir, takes: Sequence[int], exclude_contents: Sequen
         raise DataError(f"{root}: no clip of takes {list(takes)}")
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    for old in out.glob("*.bvh"):
+    for old in out.glob("*.bvh") if clear else ():
         old.unlink()
     for p in chosen:
         os.symlink(p.resolve(), out / p.name)

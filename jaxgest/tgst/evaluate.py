@@ -306,7 +306,8 @@ def evaluate(
             """Errors of one result (features, or a callable giving them) into ``record`` and the totals."""
             try:
                 feats = result_feats() if callable(result_feats) else result_feats
-                errs = features_errors(feats, c_feats, s_ref, gt, window=window, gt_reference_feats=gt_ref)
+                errs = features_errors(feats, c_feats, s_ref, gt, window=window, gt_reference_feats=gt_ref,
+                                       common=proto.common_length)
             except DataError as e:
                 skipped[name] += 1
                 record[section][name] = {"skipped": str(e)}
@@ -378,7 +379,8 @@ def metric_validity(
     clip itself, the content clip c and the style clip s are each taken as if they were a transfer result:
     row "content" = (E^content(g, c), E^style(c | g)), row "style" = (E^content(g, s), E^style(s | g)),
     averaged over pairs, under ``protocol`` (under "authors" g's style reference is g + its mirror, as for
-    any style reference). A valid metric gives a smaller content error in row "content" and a smaller style
+    any style reference, and each sample is cut to a common length with g, as the authors' evaluator cuts
+    content and transfer). A valid metric gives a smaller content error in row "content" and a smaller style
     error in row "style". Default ``pairs="inter"``: with one take per content and style (Bandai-Namco,
     synthetic) the intra-scenario style clip *is* the ground truth. Pairs with a clip too short for the
     protocol are left out and counted. Returns ``{"pairs", "num_pairs", "num_evaluated", "protocol",
@@ -404,8 +406,10 @@ def metric_validity(
         try:
             g, g_ref = cache(pair.ground_truth, fps), cache(pair.ground_truth, fps, True)
             xs = [cache(clip, fps) for clip in (pair.content, pair.style)]
-            results = [(metrics.content_error(g[0], x[0]), metrics.style_error(x[1], g_ref[1], window))
-                       for x in xs]
+            results = []
+            for x in xs:  # each sample taken as a result against g (cut to a common length with it)
+                e = features_errors(x, g, g_ref, window=window, common=proto.common_length)
+                results.append((e["content"], e["style"]))
         except DataError:
             continue
         for row, (ce, se) in zip(("content", "style"), results):

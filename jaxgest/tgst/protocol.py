@@ -68,6 +68,7 @@ class Protocol:
     forward_differences: bool  # F - 1 forward differences (else F backward, the first repeated)
     mirror_style: bool  # style references are the clip followed by its mirror
     transition_seconds: float = 0.5  # blend between a style reference and its mirror
+    common_length: bool = False  # result and compared clip cut to the shorter one's frames (authors' evaluator)
 
     def trim_frames(self, fps: float) -> int:
         return int(math.floor(self.trim_seconds * float(fps) + 0.5))
@@ -93,7 +94,8 @@ class Protocol:
 
 
 PROTOCOLS = {
-    "authors": Protocol("authors", root_local=True, trim_seconds=1.0, forward_differences=True, mirror_style=True),
+    "authors": Protocol("authors", root_local=True, trim_seconds=1.0, forward_differences=True, mirror_style=True,
+                        common_length=True),
     "world": Protocol("world", root_local=False, trim_seconds=0.0, forward_differences=False, mirror_style=False),
 }
 
@@ -119,6 +121,8 @@ def _notes(protocol: Protocol) -> dict:
         else "world positions"
     vel = "F-1 forward differences" if protocol.forward_differences else "backward differences, v[0] = v[1]"
     mirror = "style references = clip + its mirror (0.5 s blend)" if protocol.mirror_style else "no mirror"
+    if protocol.common_length:
+        mirror += "; result and content (or ground truth) cut to a common length"
     return {
         "protocol": f"{protocol.label}: {pos}; {vel}; {cut}; {mirror}",
         "content": "eqs. 13-14: both hands' positions in metres, exact DTW (not FastDTW); mean/worst/w25",
@@ -143,13 +147,20 @@ def style_reference(motion: Motion, protocol="authors") -> Motion:
     """The clip a transfer's *style* is compared with: ``motion`` followed by its mirror (0.5 s blend) under
     a protocol with ``mirror_style``, else ``motion`` itself.
 
+    The mirror is :func:`jaxgest.tgst.data.mirror_motion`: :func:`jaxgest.motion.kinematics.mirror` with the
+    rig's T-pose, exactly as the training data are mirrored. Without it the mirrored local rotations of a
+    rig whose identity pose is not symmetric (Bandai-Namco) sit on the other branch, and the 0.5 s blend
+    from the clip into its mirror swings the arms through the body (up to 0.6 m off at 9-28 m/s).
+
     References: the authors' evaluator (``setup_mirror_motions``); Kuriyama et al. 2022, §4.1 ("style
     gesture is augmented by computing mirror symmetry" in the evaluation phase).
     """
+    from jaxgest.tgst.data import mirror_motion  # the training data's mirror (rig T-pose)
+
     p = get_protocol(protocol)
     if not p.mirror_style:
         return motion
-    return kinematics.append_motion(motion, kinematics.mirror(motion), p.transition_frames(motion.fps))
+    return kinematics.append_motion(motion, mirror_motion(motion), p.transition_frames(motion.fps))
 
 
 def clip_features(motion: Motion, fps: float | None = None, protocol="authors",
@@ -185,23 +196,47 @@ def clip_features(motion: Motion, fps: float | None = None, protocol="authors",
     return hands, arms
 
 
+def common_length(a_feats, b_feats) -> tuple[tuple, tuple]:
+    """Two :func:`clip_features` tuples (of clips at one rate, one protocol) cut to the shorter clip's frames:
+    the features the clips would have had if both had been cut to ``min(F_a, F_b)`` frames first (prefixes:
+    hands ``F - 2 cut`` frames, velocities one fewer under forward differences).
+
+    As the authors' evaluator, which cuts content and transfer to their common length before the 1 s cut
+    at both ends (``content[:clip]``, ``transfer[:clip]``) and scores the style of the cut transfer.
+    A transfer has its content's length (unchanged); the controls and Table 1 compare clips of other lengths.
+    References: the authors' evaluator.py (``evaluate_distance``).
+    """
+    n = min(len(a_feats[0]), len(b_feats[0]))
+
+    def cut(f):
+        lag = len(f[0]) - len(f[1])  # 1 under forward differences, 0 under backward ones
+        return f[0][:n], f[1][:max(n - lag, 0)]
+
+    return cut(a_feats), cut(b_feats)
+
+
 def features_errors(result_feats, content_feats, style_feats, gt_feats=None, *, window: int,
-                    gt_reference_feats=None) -> dict:
+                    gt_reference_feats=None, common: bool = True) -> dict:
     """The errors of :func:`clip_errors` from precomputed :func:`clip_features` tuples (hands, arm vel).
 
     ``style_feats`` are the style *reference* features (``reference=True``); ``gt_feats`` the ground truth's
     plain features (for gt_content) and ``gt_reference_feats`` its reference features (for gt_style;
-    default ``gt_feats``).
-    References: Kuriyama et al. 2022, eqs. 13-16.
+    default ``gt_feats``). ``common`` (the protocol's ``common_length``): the result is cut to a common
+    length with the content clip for the content and both style errors, and with the ground truth for
+    gt_content (:func:`common_length`, as the authors' evaluator, where the ground truth plays the content
+    clip's part; the style references are taken whole, as theirs).
+    References: Kuriyama et al. 2022, eqs. 13-16; the authors' evaluator.py.
     """
+    res, con = common_length(result_feats, content_feats) if common else (result_feats, content_feats)
     out = {
-        "content": metrics.content_error(content_feats[0], result_feats[0]),
-        "style": metrics.style_error(result_feats[1], style_feats[1], window),
+        "content": metrics.content_error(con[0], res[0]),
+        "style": metrics.style_error(res[1], style_feats[1], window),
     }
     if gt_feats is not None:
         ref = gt_feats if gt_reference_feats is None else gt_reference_feats
-        out["gt_content"] = metrics.content_error(gt_feats[0], result_feats[0])
-        out["gt_style"] = metrics.style_error(result_feats[1], ref[1], window)
+        res_gt, gt = common_length(result_feats, gt_feats) if common else (result_feats, gt_feats)
+        out["gt_content"] = metrics.content_error(gt[0], res_gt[0])
+        out["gt_style"] = metrics.style_error(res[1], ref[1], window)
     return out
 
 
@@ -227,4 +262,4 @@ def clip_errors(result: Motion, content: Motion, style: Motion, ground_truth: Mo
         gt_ref = clip_features(ground_truth, fps, p, reference=True)
     return features_errors(clip_features(result, fps, p), clip_features(content, fps, p),
                            clip_features(style, fps, p, reference=True), gt,
-                           window=metrics.window_for_fps(fps), gt_reference_feats=gt_ref)
+                           window=metrics.window_for_fps(fps), gt_reference_feats=gt_ref, common=p.common_length)

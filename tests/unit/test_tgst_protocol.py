@@ -17,6 +17,7 @@ from jaxgest import metrics
 from jaxgest.motion import bvh, kinematics, root_motion
 from jaxgest.motion.synthetic import render_clip
 from jaxgest.tgst import evaluate as ev
+from jaxgest.tgst.data import mirror_motion
 
 
 @pytest.fixture(scope="module")
@@ -162,7 +163,7 @@ def test_root_local_positions_on_bandai_reset_root_and_hips(bandai_dir):
 def test_style_reference_is_the_clip_then_its_mirror(clip):
     ref = ev.style_reference(clip)
     n = 30  # 0.5 s at 60 fps (the authors' 30 frames at 60 fps)
-    mirror = kinematics.mirror(clip)
+    mirror = mirror_motion(clip)  # the training data's mirror (rig T-pose)
     assert ref.num_frames == 2 * clip.num_frames - n
     np.testing.assert_array_equal(ref.rotations[: clip.num_frames - n], clip.rotations[: clip.num_frames - n])
     np.testing.assert_array_equal(ref.rotations[clip.num_frames:], mirror.rotations[n:])

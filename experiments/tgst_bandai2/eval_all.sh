@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Evaluate every run of configs/ given (default: all), one after another, then Table 1 (data only) and the
+# README tables.   bash experiments/tgst_bandai2/eval_all.sh [configs/full_s0.json ...]
+set -euo pipefail
+HERE="$(cd "$(dirname "$0")" && pwd)"
+CONFIGS=()
+for c in "$@"; do CONFIGS+=("$(realpath "$c")"); done
+cd "$HERE/../.."
+export PYTHONPATH="$PWD" JAX_COMPILATION_CACHE_DIR="${JAX_COMPILATION_CACHE_DIR:-/work/xla-cache}" \
+       JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=0.2 MPLBACKEND=Agg
+PY="${PYTHON:-/work/venv/bin/python}"
+mkdir -p "$HERE/out/logs" "$HERE/results"
+[ ${#CONFIGS[@]} -eq 0 ] && CONFIGS=("$HERE"/configs/full_s0.json "$HERE"/configs/full_s1.json "$HERE"/configs/full_s2.json \
+                                     "$HERE"/configs/zeroshot_s0.json "$HERE"/configs/zeroshot_s1.json "$HERE"/configs/zeroshot_s2.json)
+for c in "${CONFIGS[@]}"; do
+  n="$(basename "$c" .json)"
+  echo "$(date -u +%T) evaluate $n"
+  "$PY" "$HERE/evaluate.py" "$c" > "$HERE/out/logs/eval_$n.log" 2>&1
+  echo "$(date -u +%T) done $n ($(tail -1 "$HERE/out/logs/eval_$n.log" | tail -c 200))"
+done

@@ -37,9 +37,9 @@ def _round(x):
 
 
 def main() -> int:
-    from jaxgest.errors import DataError
+    from jaxgest.runtime.errors import DataError
     from jaxgest.motion import datasets
-    from jaxgest.provenance import write_results
+    from jaxgest.runtime.provenance import write_results
     from jaxgest.tgst import multitake as mt
 
     ap = argparse.ArgumentParser()

@@ -24,7 +24,7 @@ NAMES = {"soft": "soft swap", "hard": "hard swap", "adain": "AdaIN", "avatarnet"
 
 
 def load(name):
-    from jaxgest.provenance import read_results
+    from jaxgest.runtime.provenance import read_results
 
     p = RES / name
     return read_results(p)["results"] if p.is_file() else None

@@ -18,10 +18,10 @@ DEFAULT_DATA = HERE.parents[1] / ".." / "shared" / "data" / "bandai-namco-2"
 
 
 def main() -> int:
-    from jaxgest.errors import DataError
-    from jaxgest.provenance import write_results
+    from jaxgest.runtime.errors import DataError
+    from jaxgest.runtime.provenance import write_results
     from jaxgest.tgst import multitake
-    from jaxgest.tgst.train import train
+    from jaxgest.tgst.trainer import train
 
     ap = argparse.ArgumentParser()
     ap.add_argument("config")

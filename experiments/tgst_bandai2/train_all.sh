@@ -6,9 +6,8 @@ HERE="$(cd "$(dirname "$0")" && pwd)"
 CONFIGS=()
 for c in "$@"; do CONFIGS+=("$(realpath "$c")"); done
 cd "$HERE/../.."
-export PYTHONPATH="$PWD" JAX_COMPILATION_CACHE_DIR="${JAX_COMPILATION_CACHE_DIR:-/work/xla-cache}" \
-       JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=0.2 MPLBACKEND=Agg
-PY="${PYTHON:-/work/venv/bin/python}"
+export PYTHONPATH="$PWD" JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=0.2 MPLBACKEND=Agg
+PY="${PYTHON:-python}"
 mkdir -p "$HERE/out/logs"
 [ ${#CONFIGS[@]} -eq 0 ] && CONFIGS=("$HERE"/configs/full_s0.json "$HERE"/configs/full_s1.json "$HERE"/configs/full_s2.json \
                                      "$HERE"/configs/zeroshot_s0.json "$HERE"/configs/zeroshot_s1.json "$HERE"/configs/zeroshot_s2.json)

@@ -18,7 +18,7 @@ import pathlib
 import re
 from collections.abc import Sequence
 
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 
 TAKE_RE = re.compile(r"_(\d+)\.bvh$")
 SPLITS = {"train": (1, 2, 3, 4), "validate": (5,), "test": (6, 7, 8)}

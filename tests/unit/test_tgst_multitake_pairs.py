@@ -9,7 +9,7 @@ import pathlib
 import pytest
 
 from conftest import SHARED
-from jaxgest.errors import DataError
+from jaxgest.runtime.errors import DataError
 from jaxgest.motion.datasets import Clip, load_folder
 from jaxgest.tgst import multitake as mt
 

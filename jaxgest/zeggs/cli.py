@@ -7,6 +7,7 @@ import pathlib
 
 from jaxgest.cli import add_train_arguments, training_data
 from jaxgest.errors import JaxgestError
+from jaxgest.zeggs.claims import SPEECH_STYLES, SUBSTITUTES
 
 
 def register(subparsers) -> None:
@@ -65,6 +66,25 @@ def register(subparsers) -> None:
                    "in a temporary folder) pooled with --probe-data")
     e.add_argument("--no-generation", action="store_true",
                    help="probes and leakage only (skip beat alignment and the Fréchet distance)")
+    e.add_argument("--claims", action="store_true",
+                   help="the paper's claims on the generated motion instead of the diagnostics: style portrayal, "
+                   "realism and appropriateness against GT and MM on --heldout data (zero-shot for the model's "
+                   "exclude_styles), real speech with --speech; --data is the training-script data; writes a "
+                   "stamped results file")
+    e.add_argument("--heldout", nargs="+", default=[], metavar="DIR",
+                   help="with --claims: held-out script datasets (e.g. jaxgest synth --seed K, K >= 1)")
+    e.add_argument("--heldout-seeds", type=int, default=0, metavar="N",
+                   help="with --claims: also the built-in synthetic data of seeds 1..N (generated in a temporary "
+                   "folder) as held-out datasets")
+    e.add_argument("--speech", nargs="+", default=[], metavar="WAV",
+                   help="with --claims: real speech files to generate from (criterion 5)")
+    e.add_argument("--speech-styles", default=",".join(SPEECH_STYLES), metavar="A,B",
+                   help="with --speech: the styles to generate in (comma-separated)")
+    e.add_argument("--segment-seconds", type=float, default=10.0,
+                   help="with --speech: length of the speech segments (the units of the intervals)")
+    e.add_argument("--substitute", default=None, choices=SUBSTITUTES,
+                   help="with --claims: replace the generated motion by real motion (a check of the evaluation: "
+                   "gt must hold, mm-style fails style portrayal, mm-script fails appropriateness)")
     e.set_defaults(func=_evaluate)
 
 
@@ -87,6 +107,10 @@ def _train(args) -> int:
     print(f"zeggs: trained {r['steps']} steps (resumed from {r['start_step']}) on {r['devices']} device(s) in "
           f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}; workdir {args.workdir}")
     return 0
+
+
+#: Config fields that are tuples of names (comma-separated in ``--override``), not of integers.
+STRING_TUPLES = ("exclude_styles",)
 
 
 def parse_overrides(items) -> dict:
@@ -112,6 +136,8 @@ def parse_overrides(items) -> dict:
                 if text.lower() not in ("true", "false", "1", "0"):
                     raise ValueError
                 value = text.lower() in ("true", "1")
+            elif name in STRING_TUPLES:
+                value = tuple(x.strip() for x in text.split(",") if x.strip())
             elif isinstance(default, tuple):
                 value = tuple(int(x) for x in text.split(",") if x.strip())
             else:
@@ -177,9 +203,34 @@ def _evaluate(args) -> int:
     from jaxgest.zeggs.evaluate import evaluate, markdown
 
     out = check_output_path(args.json)
+    claims_only = [flag for flag, on in (("--heldout", args.heldout), ("--heldout-seeds", args.heldout_seeds),
+                                         ("--speech", args.speech), ("--substitute", args.substitute)) if on]
+    if args.claims:
+        return _evaluate_claims(args, out)
+    if claims_only:
+        raise JaxgestError(f"{', '.join(claims_only)}: only with --claims")
     result = evaluate(args.workdir, args.data, seed=args.seed, max_clips=args.max_clips,
                       probe_data=args.probe_data, probe_seeds=args.probe_seeds,
                       generation=not args.no_generation)
     write_text_atomic(out, json.dumps(result, indent=2) + "\n")
     print(markdown(result))
+    return 0
+
+
+def _evaluate_claims(args, out) -> int:
+    from jaxgest.provenance import write_results
+    from jaxgest.zeggs import claims
+
+    other = [flag for flag, on in (("--probe-data", args.probe_data), ("--probe-seeds", args.probe_seeds),
+                                   ("--no-generation", args.no_generation), ("--max-clips", args.max_clips)) if on]
+    if other:
+        raise JaxgestError(f"{', '.join(other)}: not with --claims (diagnostics: run evaluate without --claims)")
+    styles = tuple(s.strip() for s in args.speech_styles.split(",") if s.strip())
+    if args.speech and not styles:
+        raise JaxgestError(f"--speech-styles {args.speech_styles!r}: expected comma-separated style names")
+    result, config = claims.run(args.workdir, args.data, heldout=args.heldout, heldout_seeds=args.heldout_seeds,
+                                speech=args.speech, speech_styles=styles, segment_s=args.segment_seconds,
+                                seed=args.seed, substitute=args.substitute)
+    write_results(out, result, config)
+    print(claims.markdown(result))
     return 0

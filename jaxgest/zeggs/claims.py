@@ -222,18 +222,25 @@ def by_dataset(values, units) -> tuple[list, np.ndarray]:
     """Per-dataset means of per-clip ``values`` (NaN skipped): ``(names, means)``."""
     values, units = np.asarray(values, np.float64), list(units)
     names = sorted(set(units), key=str)
-    means = [float(np.nanmean(values[[i for i, u in enumerate(units) if u == n]])) for n in names]
+    means = []
+    for n in names:
+        v = values[[i for i, u in enumerate(units) if u == n]]
+        means.append(float(v[np.isfinite(v)].mean()) if np.isfinite(v).any() else float("nan"))
     return names, np.asarray(means)
 
 
 def interval(values, units) -> dict:
     """Mean, SE and 95 % interval of per-clip ``values`` over datasets (``unit``: "dataset"), or over clips
-    when they come from one dataset (``unit``: "clip"); ``low`` / ``high`` the 95 % bounds."""
+    when they come from one dataset (``unit``: "clip"); ``low`` / ``high`` the 95 % bounds. Non-finite values
+    (a clip without kinematic beats) are skipped; none left gives NaNs (and ``n`` 0)."""
     values = np.asarray(values, np.float64)
     names, means = by_dataset(values, units)
-    d = means if len(names) > 1 else values[np.isfinite(values)]
-    if len(d) == 0:
-        raise DataError("claims: no finite value to summarise")
+    d = means if len(names) > 1 else values
+    d = d[np.isfinite(d)]
+    if len(d) == 0:  # e.g. motion without a kinematic beat: no value, so no claim can hold on it
+        nan = float("nan")
+        return {"mean": nan, "standard_error": nan, "ci95_half_width": nan, "z": None, "n": 0,
+                "unit": "dataset" if len(names) > 1 else "clip", "low": nan, "high": nan}
     s = mean_se(d)
     s.update({"unit": "dataset" if len(names) > 1 else "clip", "low": s["mean"] - s["ci95_half_width"],
               "high": s["mean"] + s["ci95_half_width"]})
@@ -652,6 +659,11 @@ def run(workdir, data_dir, *, heldout=(), heldout_seeds: int = 0, speech=(), spe
     for w in speech:
         if not pathlib.Path(w).is_file():
             raise DataError(f"{w}: no such speech file")
+    for d in heldout:
+        if not pathlib.Path(d).is_dir():
+            raise DataError(f"{d}: no such held-out data folder")
+    if heldout_seeds < 0:
+        raise DataError(f"--heldout-seeds must be >= 0, got {heldout_seeds}")
     if not pathlib.Path(data_dir).is_dir():
         raise DataError(f"{data_dir}: no such data folder")
     model = load_model(workdir)

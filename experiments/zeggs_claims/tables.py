@@ -75,7 +75,7 @@ def zero_shot_table(runs, title) -> list:
     for r, d in docs:
         for s, z in d["results"]["claims"]["zero_shot"].items():
             e = z.get("embedding") or {}
-            emb = (f"{e['nearest_centroid_distance']:.3f} / {e['training_spread']:.3f} ({e['separation']:.2f}; "
+            emb = (f"{e['nearest_centroid_distance']:.3f} / {e['training_spread']:.3f} ({e['separation'] or float('nan'):.2f}; "
                    f"nearest: {max(e['nearest_style_counts'], key=e['nearest_style_counts'].get)})") if e else ""
             ratio = "n/a" if z["ratio"] is None else f"{z['ratio']:.2f}"
             lines.append(f"| {r} | {s} | {z['generated']:.3f} | {z['gt']:.3f} | {z['mm']:.3f} | {ratio} | {emb} | "
@@ -123,7 +123,7 @@ def main():
     readme = HERE / "README.md"
     old = readme.read_text()
     new = re.sub(r"(<!-- tables:start -->\n).*(<!-- tables:end -->)", lambda m: m.group(1) + text + "\n" + m.group(2),
-                 old, flags=re.S)
+                 old, flags=re.DOTALL)
     write_text_atomic(readme, new)
     print(f"tables.py: rewrote the tables of {readme}")
 

@@ -51,7 +51,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import pathlib
-from typing import Callable, Optional, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -73,7 +73,7 @@ SPEECH_STYLES = ("energetic", "sad")
 # Features and the independent style classifier
 
 
-def frame_features(motion, cache: Optional[dict] = None) -> np.ndarray:
+def frame_features(motion, cache: dict | None = None) -> np.ndarray:
     """Per-frame root-frame joint positions and velocities ``(F, 6J)`` (the Fréchet distance's features,
     :func:`jaxgest.zeggs.evaluate.motion_statistics_features`). ``cache``: a dict (owned by the caller) that
     keeps each motion's features for reuse within one evaluation."""
@@ -87,7 +87,7 @@ def frame_features(motion, cache: Optional[dict] = None) -> np.ndarray:
 
 
 def window_statistics(motion, *, window_s: float = PROBE_WINDOW_S, stride_s: float = PROBE_STRIDE_S,
-                      cache: Optional[dict] = None) -> np.ndarray:
+                      cache: dict | None = None) -> np.ndarray:
     """Raw window statistics ``(W, 12J)``: mean and std of :func:`frame_features` over windows of ``window_s``
     seconds every ``stride_s`` seconds (at least one window; a shorter clip is one window)."""
     f = frame_features(motion, cache)
@@ -110,7 +110,7 @@ class StyleClassifier:
     labels: list  # (N,) their clips' styles
 
     @classmethod
-    def fit(cls, clips, cache: Optional[dict] = None) -> "StyleClassifier":
+    def fit(cls, clips, cache: dict | None = None) -> StyleClassifier:
         """Fitted on every window of ``clips`` (real clips of the training scripts; >= 2 styles)."""
         clips = list(clips)
         if len({c.style for c in clips}) < 2:
@@ -122,7 +122,7 @@ class StyleClassifier:
     def styles(self) -> list:
         return sorted(set(self.labels), key=str)
 
-    def predict(self, motions, cache: Optional[dict] = None) -> list[list]:
+    def predict(self, motions, cache: dict | None = None) -> list[list]:
         """Per motion, the style predicted for each of its windows (one fit for all of them)."""
         feats = [window_statistics(m, cache=cache) for m in motions]
         if not feats:
@@ -229,9 +229,10 @@ def by_dataset(values, units) -> tuple[list, np.ndarray]:
     return names, np.asarray(means)
 
 
-def interval(values, units) -> dict:
+def interval(values, units, unit_name: str = "dataset") -> dict:
     """Mean, SE and 95 % interval of per-clip ``values`` over datasets (``unit``: "dataset"), or over clips
-    when they come from one dataset (``unit``: "clip"); ``low`` / ``high`` the 95 % bounds. Non-finite values
+    when they come from one dataset (``unit``: "clip"; ``unit_name`` names the units, e.g. "segment");
+    ``low`` / ``high`` the 95 % bounds. Non-finite values
     (a clip without kinematic beats) are skipped; none left gives NaNs (and ``n`` 0)."""
     values = np.asarray(values, np.float64)
     names, means = by_dataset(values, units)
@@ -240,9 +241,9 @@ def interval(values, units) -> dict:
     if len(d) == 0:  # e.g. motion without a kinematic beat: no value, so no claim can hold on it
         nan = float("nan")
         return {"mean": nan, "standard_error": nan, "ci95_half_width": nan, "z": None, "n": 0,
-                "unit": "dataset" if len(names) > 1 else "clip", "low": nan, "high": nan}
+                "unit": unit_name if len(names) > 1 else "clip", "low": nan, "high": nan}
     s = mean_se(d)
-    s.update({"unit": "dataset" if len(names) > 1 else "clip", "low": s["mean"] - s["ci95_half_width"],
+    s.update({"unit": unit_name if len(names) > 1 else "clip", "low": s["mean"] - s["ci95_half_width"],
               "high": s["mean"] + s["ci95_half_width"]})
     return s
 
@@ -256,7 +257,7 @@ def clip_accuracy(predictions, label) -> float:
     return float(np.mean([p == label for p in predictions])) if predictions else float("nan")
 
 
-def style_portrayal(classifier: StyleClassifier, items, generated, cache: Optional[dict] = None) -> dict:
+def style_portrayal(classifier: StyleClassifier, items, generated, cache: dict | None = None) -> dict:
     """Criterion 1: the classifier's accuracy (the item's style as the label) on the generated motion, on GT
     (the real held-out clips) and on MM (the real held-out clips of another style), per clip, per style and
     overall with intervals over datasets; the paired difference generated - MM; the verdict
@@ -320,7 +321,7 @@ def embedding_collapse(train_embeddings: dict, left_out) -> dict:
     return {"nearest_centroid_distance": float(np.median(nearest)), "training_spread": spread,
             "separation": float(np.median(nearest) / spread) if spread > 0 else None,
             "nearest_style_counts": dict(collections.Counter(names[k] for k in d.argmin(1))),
-            "windows": int(len(x))}
+            "windows": len(x)}
 
 
 def style_embeddings(model, clips) -> dict:
@@ -334,7 +335,7 @@ def style_embeddings(model, clips) -> dict:
     return {s: np.concatenate(v) for s, v in by.items()}
 
 
-def zero_shot(portrayal: dict, style: str, embeddings: Optional[dict] = None) -> dict:
+def zero_shot(portrayal: dict, style: str, embeddings: dict | None = None) -> dict:
     """Criterion 2 for the left-out ``style``: its accuracy in :func:`style_portrayal`'s ``per_style`` against
     :data:`ZERO_SHOT_RATIO` x its GT accuracy, and (``embeddings``: style -> window embeddings of held-out
     clips, e.g. :func:`style_embeddings`) :func:`embedding_collapse` against the other styles. ``holds``:
@@ -358,7 +359,7 @@ def zero_shot(portrayal: dict, style: str, embeddings: Optional[dict] = None) ->
 # 3. Realism
 
 
-def realism(items, generated, train_clips, cache: Optional[dict] = None) -> dict:
+def realism(items, generated, train_clips, cache: dict | None = None) -> dict:
     """Criterion 3: per held-out dataset k, FD(generated of k, real of k) / median_j FD(real of j, real of k),
     j over the other held-out datasets and the training clips (real other-script motion); the geometric mean
     over datasets with a 95 % interval of the mean log ratio; ``holds`` when the geometric mean <=
@@ -406,7 +407,7 @@ def motion_beats(motion) -> np.ndarray:
     return metrics.kinematic_beats(speed, motion.fps)
 
 
-def beat_align(motion, onsets, *, max_s: Optional[float] = None) -> float:
+def beat_align(motion, onsets, *, max_s: float | None = None) -> float:
     """BeatAlign of ``motion``'s beats (those before ``max_s`` s when given) against ``onsets``; NaN when the
     motion has no beat."""
     b = motion_beats(motion)
@@ -468,7 +469,7 @@ def speech_segments(path, segment_s: float) -> list[tuple]:
 
 
 def real_speech(model, wavs, train_clips, *, styles: Sequence[str] = SPEECH_STYLES, segment_s: float = 10.0,
-                seed: int = 0, classifier: Optional[StyleClassifier] = None, progress: bool = False) -> dict:
+                seed: int = 0, classifier: StyleClassifier | None = None, progress: bool = False) -> dict:
     """Criterion 5: gestures generated from real speech files in each of ``styles`` (the example: the first
     training clip of the style, by content), per ``segment_s``-second segment. Per style: BeatAlign of the
     generated motion against the segment's onsets, of MM (real training clips of the style, cycled, scored
@@ -503,9 +504,9 @@ def real_speech(model, wavs, train_clips, *, styles: Sequence[str] = SPEECH_STYL
             motions.append(g)
         units = [f"segment-{i}" for i in range(len(rows))]  # segments are the units
         col = {k: np.array([r[k] for r in rows]) for k in ("generated", "mm", "shuffled")}
-        res = {k: interval(v, units) for k, v in col.items()}
-        res["generated_minus_mm"] = interval(col["generated"] - col["mm"], units)
-        res["generated_minus_shuffled"] = interval(col["generated"] - col["shuffled"], units)
+        res = {k: interval(v, units, "segment") for k, v in col.items()}
+        res["generated_minus_mm"] = interval(col["generated"] - col["mm"], units, "segment")
+        res["generated_minus_shuffled"] = interval(col["generated"] - col["shuffled"], units, "segment")
         preds = [p for ps in classifier.predict(motions) for p in ps]
         res["recognised"] = clip_accuracy(preds, style)
         res["predicted_counts"] = dict(collections.Counter(preds))
@@ -520,9 +521,9 @@ def real_speech(model, wavs, train_clips, *, styles: Sequence[str] = SPEECH_STYL
 # All together
 
 
-def evaluate_claims(model, train_clips, datasets, *, seed: int = 0, substitute: Optional[str] = None,
+def evaluate_claims(model, train_clips, datasets, *, seed: int = 0, substitute: str | None = None,
                     exclude_styles: Sequence[str] = (), progress: bool = False,
-                    generate: Optional[Callable] = None) -> dict:
+                    generate: Callable | None = None) -> dict:
     """Criteria 1, 3 and 4 (and 2 for every style in ``exclude_styles``, the styles the model never saw)
     on held-out ``datasets`` (``(name, clips)`` pairs); ``train_clips``: the real training-script clips
     (classifier, examples, MM). ``substitute`` (:data:`SUBSTITUTES`) replaces the generated motion by real
@@ -618,8 +619,9 @@ def markdown(result: dict) -> str:
         lines.append("")
         for s, z in (c.get("zero_shot") or {}).items():
             e = z.get("embedding")
+            sep = "n/a" if not e or e["separation"] is None else f"{e['separation']:.2f}"
             extra = "" if not e else (f"; embedding: nearest training centroid {e['nearest_centroid_distance']:.3f} vs "
-                                      f"training spread {e['training_spread']:.3f} (separation {e['separation']:.2f})")
+                                      f"training spread {e['training_spread']:.3f} (separation {sep})")
             r = "n/a" if z["ratio"] is None else f"{z['ratio']:.2f}"
             lines.append(f"2. zero-shot `{s}`: generated {z['generated']:.3f} vs GT {z['gt']:.3f} (ratio {r}){extra}: "
                          f"{_verdict(z['holds'])}")
@@ -639,7 +641,7 @@ def markdown(result: dict) -> str:
 
 
 def run(workdir, data_dir, *, heldout=(), heldout_seeds: int = 0, speech=(), speech_styles=SPEECH_STYLES,
-        segment_s: float = 10.0, seed: int = 0, substitute: Optional[str] = None, progress: bool = True) -> tuple:
+        segment_s: float = 10.0, seed: int = 0, substitute: str | None = None, progress: bool = True) -> tuple:
     """``jaxgest zeggs evaluate --claims``: the trained model of ``workdir``, its training-script clips
     ``data_dir`` (the classifier, examples, MM), held-out folders ``heldout`` and synthetic seeds
     1..``heldout_seeds`` (criteria 1, 3, 4 and 2 for the model's ``exclude_styles``), and speech files

@@ -81,3 +81,17 @@ def test_train_exclude_styles(tiny_data, tmp_path, capsys):
                    "--steps", "1", "--override", "exclude_styles=happy"])
     err = capsys.readouterr().err
     assert rc == 2 and "exclude_styles names style(s) the data does not have: happy" in err
+
+
+@pytest.mark.realdata
+def test_claims_cli_real_speech(zeggs_workdir, zeggs_dir, claim_data, tmp_path, capsys):
+    """Criterion 5 on the real ZEGGS recording (68.8 s, 16 kHz): segments in two styles, BeatAlign vs MM."""
+    wav = zeggs_dir / "067_Speech_2_x_1_0.wav"
+    out = tmp_path / "speech.json"
+    rc = cli.main(["zeggs", "evaluate", "--workdir", str(zeggs_workdir), "--data", str(claim_data / "train"),
+                   "--claims", "--speech", str(wav), "--segment-seconds", "20", "--json", str(out)])
+    assert rc == 0
+    rs = read_results(out)["results"]["real_speech"]
+    assert rs["segments"] == 3 and set(rs["styles"]) == {"energetic", "sad"}  # 68.8 s: 20 + 20 + 20 (+ 8.8 dropped)
+    for x in rs["styles"].values():
+        assert 0.0 <= x["recognised"] <= 1.0 and x["generated"]["n"] == 3

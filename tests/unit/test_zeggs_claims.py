@@ -139,3 +139,21 @@ def test_exclude_styles_data_and_override(sets):
     with pytest.raises(DataError, match="leaves no clip"):
         zdata.exclude_styles(train, tuple({c.style for c in train}), "D")
     assert parse_overrides(["exclude_styles=sad,left_handed"]) == {"exclude_styles": ("sad", "left_handed")}
+
+
+@pytest.mark.slow
+def test_full_size_substitutes(tmp_path_factory):
+    """At the experiment's size (6 contents x 7 styles x 10 s; two held-out script sets): GT passes every claim,
+    MM of another style fails style portrayal, MM of another script fails appropriateness."""
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.motion.synthetic import write_dataset
+
+    root = tmp_path_factory.mktemp("claims_full")
+    for k in range(3):
+        write_dataset(root / f"seed{k}", seed=k, progress=False)
+    train = load_folder(root / "seed0")
+    held = [(f"seed{k}", load_folder(root / f"seed{k}")) for k in (1, 2)]
+    gt = claims.evaluate_claims(None, train, held, substitute="gt")
+    assert gt["style_portrayal"]["holds"] and gt["realism"]["holds"] and gt["appropriateness"]["holds"]
+    assert not claims.evaluate_claims(None, train, held, substitute="mm-style")["style_portrayal"]["holds"]
+    assert not claims.evaluate_claims(None, train, held, substitute="mm-script")["appropriateness"]["holds"]

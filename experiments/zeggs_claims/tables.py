@@ -16,7 +16,7 @@ from jaxgest.provenance import read_results
 HERE = pathlib.Path(__file__).resolve().parent
 OUT = HERE / "out"
 MAIN = [f"small_s{k}" for k in range(5)]
-ZERO_SHOT = [f"zs_{s}_s{k}" for s in ("left_handed", "sad") for k in range(2)]
+ZERO_SHOT = [f"zs_{s}_s{k}" for s in ("sad", "tense") for k in range(2)]
 PILOTS = ["pilot", "pilot_zs_sad"]
 
 

@@ -486,10 +486,11 @@ def real_speech(model, wavs, train_clips, *, styles: Sequence[str] = SPEECH_STYL
             raise DataError(f"{w}: no such speech file")
         segments += [(str(w), *s) for s in speech_segments(w, segment_s)]
     out = {"files": [str(w) for w in wavs], "segments": len(segments), "segment_s": segment_s, "styles": {}}
+    missing = [s for s in styles if s not in {c.style for c in train}]
+    if missing:
+        raise DataError(f"real speech: no training clip of the style(s) {', '.join(missing)}")
     for style in styles:
         pool = [c for c in train if c.style == style]
-        if not pool:
-            raise DataError(f"real speech: style {style!r} has no training clip")
         rows, motions = [], []
         for i, (w, y, sr, t0) in enumerate(tqdm(segments, desc=f"claims: speech ({style})", disable=not progress,
                                               leave=False)):
@@ -672,6 +673,9 @@ def run(workdir, data_dir, *, heldout=(), heldout_seeds: int = 0, speech=(), spe
     train = [c for c in load_folder(data_dir) if c.audio is not None]
     if not train:
         raise DataError(f"{data_dir}: no training clip with audio")
+    missing = [st for st in (speech_styles if speech else ()) if st not in {c.style for c in train}]
+    if missing:
+        raise DataError(f"{data_dir}: no training clip of the --speech-styles {', '.join(missing)}")
     excluded = tuple(model.cfg.train.exclude_styles)
     result = {}
     if heldout or heldout_seeds:

@@ -57,10 +57,11 @@ def test_claims_cli_gt_substitute_holds(zeggs_workdir, claim_data, tmp_path, cap
     (["--claims", "--speech", "MISSING.wav"], "MISSING.wav: no such speech file"),
     (["--claims", "--heldout", "H", "--probe-seeds", "2"], "--probe-seeds: not with --claims"),
     (["--claims", "--heldout-seeds", "-1"], "--heldout-seeds must be >= 0"),
+    (["--claims", "--speech", "WAV", "--speech-styles", "sad,happy"], "no training clip of the --speech-styles happy"),
 ])
 def test_claims_cli_bad_input(zeggs_workdir, claim_data, tmp_path, capsys, extra, message):
-    extra = [str(claim_data / "held") if a == "H" else str(tmp_path / a) if a.startswith("MISSING") else a
-             for a in extra]
+    named = {"H": str(claim_data / "held"), "WAV": str(claim_data / "held" / "greeting_sad_0.wav")}
+    extra = [named.get(a, str(tmp_path / a) if a.startswith("MISSING") else a) for a in extra]
     rc = cli.main(["zeggs", "evaluate", "--workdir", str(zeggs_workdir), "--data", str(claim_data / "train"),
                    "--json", str(tmp_path / "x.json"), *extra])
     err = capsys.readouterr().err

@@ -53,7 +53,8 @@ def register(subparsers) -> None:
     c.add_argument("--window", type=float, default=4.0, help="style window in seconds")
     c.set_defaults(func=_pca)
 
-    e = sub.add_parser("evaluate", help="style probe, beat alignment vs shuffled control, Fréchet distance")
+    e = sub.add_parser("evaluate", help="style probe, beat alignment vs shuffled control, Fréchet distance; "
+                       "--claims: the paper's claims on generated motion against GT and MM")
     e.add_argument("--workdir", required=True)
     e.add_argument("--data", required=True)
     e.add_argument("--json", required=True, metavar="OUT.json")

@@ -8,6 +8,7 @@ import pathlib
 from jaxgest.commands.common import add_train_arguments, overrides, training_data
 from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.zeggs.config import PRESETS
+from jaxgest.zeggs.claims import SPEECH_STYLES, SUBSTITUTES
 
 
 def register(subparsers) -> None:
@@ -51,7 +52,8 @@ def register(subparsers) -> None:
     c.add_argument("--window", type=float, default=4.0, help="style window in seconds")
     c.set_defaults(func=_pca)
 
-    e = sub.add_parser("evaluate", help="style probe, beat alignment vs shuffled control, Fréchet distance")
+    e = sub.add_parser("evaluate", help="style probe, beat alignment vs shuffled control, Fréchet distance; "
+                       "--claims: the paper's claims on generated motion against GT and MM")
     e.add_argument("--workdir", required=True)
     e.add_argument("--data", required=True)
     e.add_argument("--json", required=True, metavar="OUT.json")
@@ -67,6 +69,25 @@ def register(subparsers) -> None:
     e.add_argument("--html", default=None, metavar="DIR",
                    help="also write 3D viewer pages of the best, median and worst generated test clips "
                    "(DIR/best.html, ...; ranked by BeatAlign minus its shuffled control)")
+    e.add_argument("--claims", action="store_true",
+                   help="the paper's claims on the generated motion instead of the diagnostics: style portrayal, "
+                   "realism and appropriateness against GT and MM on --heldout data (zero-shot for the model's "
+                   "exclude_styles), real speech with --speech; --data is the training-script data; writes a "
+                   "stamped results file")
+    e.add_argument("--heldout", nargs="+", default=[], metavar="DIR",
+                   help="with --claims: held-out script datasets (e.g. jaxgest synth --seed K, K >= 1)")
+    e.add_argument("--heldout-seeds", type=int, default=0, metavar="N",
+                   help="with --claims: also the built-in synthetic data of seeds 1..N (generated in a temporary "
+                   "folder) as held-out datasets")
+    e.add_argument("--speech", nargs="+", default=[], metavar="WAV",
+                   help="with --claims: real speech files to generate from (criterion 5)")
+    e.add_argument("--speech-styles", default=",".join(SPEECH_STYLES), metavar="A,B",
+                   help="with --speech: the styles to generate in (comma-separated)")
+    e.add_argument("--segment-seconds", type=float, default=10.0,
+                   help="with --speech: length of the speech segments (the units of the intervals)")
+    e.add_argument("--substitute", default=None, choices=SUBSTITUTES,
+                   help="with --claims: replace the generated motion by real motion (a check of the evaluation: "
+                   "gt must hold, mm-style fails style portrayal, mm-script fails appropriateness)")
     e.set_defaults(func=_evaluate)
 
 
@@ -149,6 +170,12 @@ def _evaluate(args) -> int:
     from jaxgest.zeggs.evaluate import evaluate, markdown
 
     out = check_output_path(args.json)
+    claims_only = [flag for flag, on in (("--heldout", args.heldout), ("--heldout-seeds", args.heldout_seeds),
+                                         ("--speech", args.speech), ("--substitute", args.substitute)) if on]
+    if args.claims:
+        return _evaluate_claims(args, out)
+    if claims_only:
+        raise JaxgestError(f"{', '.join(claims_only)}: only with --claims")
     html_dir = None
     if args.html:
         from jaxgest.viewer import prepare_html_dir
@@ -169,4 +196,23 @@ def _evaluate(args) -> int:
         pages = zeggs_evaluation_pages(result, load_model(args.workdir), load_folder(args.data), html_dir,
                                        seed=args.seed)
         print("\n3D viewer pages: " + ", ".join(str(p) for p in pages))
+    return 0
+
+
+def _evaluate_claims(args, out) -> int:
+    from jaxgest.runtime.provenance import write_results
+    from jaxgest.zeggs import claims
+
+    other = [flag for flag, on in (("--probe-data", args.probe_data), ("--probe-seeds", args.probe_seeds),
+                                   ("--no-generation", args.no_generation), ("--max-clips", args.max_clips)) if on]
+    if other:
+        raise JaxgestError(f"{', '.join(other)}: not with --claims (diagnostics: run evaluate without --claims)")
+    styles = tuple(s.strip() for s in args.speech_styles.split(",") if s.strip())
+    if args.speech and not styles:
+        raise JaxgestError(f"--speech-styles {args.speech_styles!r}: expected comma-separated style names")
+    result, config = claims.run(args.workdir, args.data, heldout=args.heldout, heldout_seeds=args.heldout_seeds,
+                                speech=args.speech, speech_styles=styles, segment_s=args.segment_seconds,
+                                seed=args.seed, substitute=args.substitute)
+    write_results(out, result, config)
+    print(claims.markdown(result))
     return 0

@@ -100,6 +100,8 @@ def _coerce(key: str, value, current, optional: bool = False):
             return tuple(value)
         if not isinstance(value, (str, bytes)) and isinstance(value, (int, float)) and len(current) == 1:
             return (value,)
+        if isinstance(value, str):  # a comma-separated list: exclude_styles=sad,tense
+            return tuple(parse_value(x.strip()) for x in value.split(",") if x.strip())
     elif isinstance(current, float):
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)

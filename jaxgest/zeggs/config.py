@@ -175,6 +175,8 @@ class TrainConfig(_Compiled):
     #   reconstruction loss (the move from the replaced pose to the target's has no target of its own)
     speed_augmentation: float = 0.1  # +-10 % speed changes of whole sequences (data pipeline)
     mirror: bool = True  # add mirrored sequences (data pipeline)
+    exclude_styles: tuple[str, ...] = ()  # style labels left out of training (leave-one-style-out, the zero-shot
+    #   claim: jaxgest.zeggs.claims); their clips stay in the data folder for examples and evaluation
     steps: int = 120_000  # default number of training steps (the authors')
     # --- compilation ----------------------------------------------------------------------------------
     xla_opt_level: Optional[int] = None  # XLA backend optimisation level of the jitted training functions

@@ -275,6 +275,25 @@ def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Seq
     return ZeggsData(seqs, pose_stats, speech_stats, fps, clips[0].motion.skeleton)
 
 
+def exclude_styles(clips, styles: Sequence[str], data_dir=None) -> list:
+    """``clips`` without those of the ``styles`` left out of training (``TrainConfig.exclude_styles``).
+    :class:`DataError` (one line naming ``data_dir``) for a style the data does not have, or when no clip is
+    left. References: Ghorbani et al. 2023, §5.1 (styles unseen in training)."""
+    styles = tuple(styles)
+    if not styles:
+        return list(clips)
+    where = f"{data_dir}: " if data_dir is not None else ""
+    have = {c.style for c in clips}
+    missing = [s for s in styles if s not in have]
+    if missing:
+        raise DataError(f"{where}exclude_styles names style(s) the data does not have: {', '.join(missing)} "
+                        f"(styles: {', '.join(sorted(have, key=str))})")
+    kept = [c for c in clips if c.style not in styles]
+    if not kept:
+        raise DataError(f"{where}exclude_styles leaves no clip to train on")
+    return kept
+
+
 def load(data_dir, *, fps: float, **kw) -> ZeggsData:
     """:func:`build` on every clip of a folder that has audio."""
     clips = [c for c in load_folder(data_dir) if c.audio is not None]

@@ -91,7 +91,7 @@ def statistics_windows(model, clip, window_s: float = 4.0, *, stride_s: Optional
     return np.concatenate([x.mean(1), x.std(1)], axis=1)
 
 
-def _mean_se(d) -> dict:
+def mean_se(d) -> dict:
     """Mean, standard error (std ddof 1 / sqrt(n); 0 for n = 1), 95 % normal CI half-width, z = mean / SE
     (None when SE = 0) and n."""
     d = np.asarray(d, np.float64)
@@ -99,6 +99,9 @@ def _mean_se(d) -> dict:
     m = float(d.mean())
     return {"mean": m, "standard_error": se, "ci95_half_width": 1.96 * se, "z": m / se if se > 0 else None,
             "n": int(len(d))}
+
+
+_mean_se = mean_se  # the earlier private name, kept for its importers
 
 
 def probe_folds(groups) -> list[tuple]:

@@ -85,6 +85,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
         skeleton = clips[0].motion.skeleton
         cfg = config_for(preset, skeleton, overrides)
         model, tcfg = cfg.model, cfg.train
+        clips = zdata.exclude_styles(clips, tcfg.exclude_styles, data_dir)  # leave-one-style-out (zero-shot)
         steps = int(steps if steps is not None else tcfg.steps)
 
         stats_paths = workdir / wd.POSE_STATS, workdir / wd.SPEECH_STATS

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# ZeroEGGS's claims on the generated motion (issue 37). Usage, from anywhere:
+#   experiments/zeggs_claims/run.sh [RUN...]     # default: the 9 runs of runs.tsv that are not pilots
+# Per run: trains out/RUN (resumes; skipped when done), then `jaxgest zeggs evaluate --claims` on the 8
+# held-out script datasets and the real speech -> out/claims_RUN.json (stamped) and out/claims_RUN.md.
+# Data (written once): out/data = jaxgest synth --seed 0 (training scripts), out/heldout/seedK, K = 1..8.
+# Environment: PYTHON (default python), HELDOUT (default 8), SHARED (default: ../shared beside the repo).
+set -euo pipefail
+HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"; ROOT="$(cd "$HERE/../.." && pwd)"
+PY="${PYTHON:-python}"; OUT="$HERE/out"; HELDOUT="${HELDOUT:-8}"
+SHARED="${SHARED:-$ROOT/../shared}"; SPEECH_DIR="$SHARED/data/speech-gesture"
+J=("$PY" -m jaxgest.cli)
+export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
+mkdir -p "$OUT"
+[ -f "$OUT/data/manifest.csv" ] || "${J[@]}" synth --out "$OUT/data" --seed 0 > /dev/null
+held=()
+for k in $(seq 1 "$HELDOUT"); do
+  [ -f "$OUT/heldout/seed$k/manifest.csv" ] || "${J[@]}" synth --out "$OUT/heldout/seed$k" --seed "$k" > /dev/null
+  held+=("$OUT/heldout/seed$k")
+done
+speech=(); for w in "$SPEECH_DIR"/zeggs/*.wav "$SPEECH_DIR"/beat2/*.wav; do [ -f "$w" ] && speech+=("$w"); done
+runs=("$@"); [ ${#runs[@]} -gt 0 ] || mapfile -t runs < <(grep -v '^#' "$HERE/runs.tsv" | cut -f1 | grep -v '^pilot')
+for run in "${runs[@]}"; do
+  line=$(grep -P "^$run\t" "$HERE/runs.tsv") || { echo "run.sh: no run $run in runs.tsv" >&2; exit 2; }
+  IFS=$'\t' read -r name preset steps seed exclude <<< "$line"
+  ov=(); [ "$exclude" = "-" ] || ov=(--override "train.exclude_styles=$exclude")
+  s=$(date +%s)
+  "${J[@]}" zeggs train --data "$OUT/data" --workdir "$OUT/$name" --preset "$preset" --steps "$steps" \
+      --seed "$seed" "${ov[@]}" > "$OUT/train_$name.log" 2>&1
+  t=$(date +%s); echo "$name: trained in $(( t - s )) s ($steps steps)"
+  sp=(); [ ${#speech[@]} -eq 0 ] || sp=(--speech "${speech[@]}")
+  "${J[@]}" zeggs evaluate --workdir "$OUT/$name" --data "$OUT/data" --claims --heldout "${held[@]}" "${sp[@]}" \
+      --json "$OUT/claims_$name.json" > "$OUT/claims_$name.md"
+  echo "$name: evaluated in $(( $(date +%s) - t )) s"
+done
+"$PY" "$HERE/tables.py"

@@ -1,0 +1,132 @@
+"""The tables of this experiment's README, generated from its stamped results files (out/claims_RUN.json,
+written by run.sh with `jaxgest zeggs evaluate --claims`). Rewrites the README between its table markers.
+
+Usage (from anywhere): python experiments/zeggs_claims/tables.py [--print]
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import re
+
+from jaxgest.runtime.io import write_text_atomic
+from jaxgest.runtime.provenance import read_results
+
+HERE = pathlib.Path(__file__).resolve().parent
+OUT = HERE / "out"
+MAIN = [f"small_s{k}" for k in range(5)]
+ZERO_SHOT = [f"zs_{s}_s{k}" for s in ("sad", "tense") for k in range(2)]
+PILOTS = ["pilot", "pilot_zs_sad"]
+
+
+def load(run):
+    p = OUT / f"claims_{run}.json"
+    return read_results(p) if p.is_file() else None
+
+
+def ci(s) -> str:
+    return f"{s['mean']:.3f} [{s['low']:.3f}, {s['high']:.3f}]"
+
+
+def yes(ok) -> str:
+    return "holds" if ok else "does not hold"
+
+
+def claims_table(runs, title) -> list:
+    docs = [(r, load(r)) for r in runs]
+    docs = [(r, d) for r, d in docs if d and "claims" in d["results"]]
+    lines = [f"### {title}", ""]
+    if not docs:
+        return lines + ["not yet run", ""]
+    lines += ["| run (step) | 1. style: generated | GT | MM | ratio | 3. realism: Fréchet ratio (geo. mean) | "
+              "4. BeatAlign generated - MM | generated - shuffled | GT - MM |", "|---|---|---|---|---|---|---|---|---|"]
+    n = {"style_portrayal": 0, "realism": 0, "appropriateness": 0}
+    for r, d in docs:
+        c, step = d["results"]["claims"], d["stamp"]["config"].get("checkpoint_step")
+        sp, re_, ap = c["style_portrayal"], c["realism"], c["appropriateness"]
+        for k in n:
+            n[k] += bool(c[k]["holds"])
+        lines.append(f"| {r} ({step}) | {ci(sp['generated'])} | {ci(sp['gt'])} | {ci(sp['mm'])} | "
+                     f"{sp['ratio_to_gt']:.2f}: {yes(sp['holds'])} | {re_['geometric_mean_ratio']:.2f} "
+                     f"[{re_['ratio_low']:.2f}, {re_['ratio_high']:.2f}]: {yes(re_['holds'])} | "
+                     f"{ci(ap['generated_minus_mm'])}: {yes(ap['holds'])} | {ci(ap['generated_minus_shuffled'])} | "
+                     f"{ci(ap['gt_minus_mm'])} |")
+    lines += ["", f"Holds in: style portrayal {n['style_portrayal']} / {len(docs)}, realism {n['realism']} / "
+              f"{len(docs)}, appropriateness {n['appropriateness']} / {len(docs)} runs (a claim holds when >= 4 of 5).", ""]
+    styles = sorted(docs[0][1]["results"]["claims"]["style_portrayal"]["per_style"])
+    lines += ["| style: accuracy generated / GT / MM (mean over runs) |" + "|".join(f" {s} " for s in styles) + "|",
+              "|---|" + "---|" * len(styles)]
+    cells = []
+    for s in styles:
+        ps = [d["results"]["claims"]["style_portrayal"]["per_style"][s] for _, d in docs]
+        cells.append(" / ".join(f"{sum(p[k] for p in ps) / len(ps):.2f}" for k in ("generated", "gt", "mm")))
+    return lines + ["| |" + "|".join(f" {c} " for c in cells) + "|", ""]
+
+
+def zero_shot_table(runs, title) -> list:
+    docs = [(r, load(r)) for r in runs]
+    docs = [(r, d) for r, d in docs if d and d["results"].get("claims", {}).get("zero_shot")]
+    lines = [f"### {title}", ""]
+    if not docs:
+        return lines + ["not yet run", ""]
+    lines += ["| run | left-out style | generated | GT | MM | ratio (>= 0.5) | embedding: nearest training centroid / "
+              "training spread (separation > 1) | verdict |", "|---|---|---|---|---|---|---|---|"]
+    for r, d in docs:
+        for s, z in d["results"]["claims"]["zero_shot"].items():
+            e = z.get("embedding") or {}
+            emb = (f"{e['nearest_centroid_distance']:.3f} / {e['training_spread']:.3f} ({e['separation'] or float('nan'):.2f}; "
+                   f"nearest: {max(e['nearest_style_counts'], key=e['nearest_style_counts'].get)})") if e else ""
+            ratio = "n/a" if z["ratio"] is None else f"{z['ratio']:.2f}"
+            lines.append(f"| {r} | {s} | {z['generated']:.3f} | {z['gt']:.3f} | {z['mm']:.3f} | {ratio} | {emb} | "
+                         f"{yes(z['holds'])} |")
+    return lines + [""]
+
+
+def speech_table(runs, title) -> list:
+    docs = [(r, load(r)) for r in runs]
+    docs = [(r, d) for r, d in docs if d and "real_speech" in d["results"]]
+    lines = [f"### {title}", ""]
+    if not docs:
+        return lines + ["not yet run", ""]
+    lines += ["| run | style | BeatAlign generated | MM | generated - MM | generated - shuffled | classifier: "
+              "recognised (GT of the style, held-out clips) | BeatAlign verdict |", "|---|---|---|---|---|---|---|---|"]
+    for r, d in docs:
+        rs = d["results"]["real_speech"]
+        per = d["results"].get("claims", {}).get("style_portrayal", {}).get("per_style", {})
+        for s, x in rs["styles"].items():
+            gt = f" ({per[s]['gt']:.3f})" if s in per else ""
+            lines.append(f"| {r} ({rs['segments']} segments) | {s} | {ci(x['generated'])} | {ci(x['mm'])} | "
+                         f"{ci(x['generated_minus_mm'])} | {ci(x['generated_minus_shuffled'])} | "
+                         f"{x['recognised']:.3f}{gt} | {yes(x['holds'])} |")
+    return lines + [""]
+
+
+def tables() -> str:
+    return "\n".join(
+        claims_table(MAIN, "Table 1. Claims 1, 3, 4: `small`, 8,000 steps, 5 seeds (`run.sh`)")
+        + zero_shot_table(ZERO_SHOT, "Table 2. Claim 2, zero-shot: 2 seeds per left-out style (`run.sh`)")
+        + speech_table(MAIN, "Table 3. Claim 5, real speech (ZEGGS + BEAT2 WAVs), 2 styles (`run.sh`)")
+        + claims_table(PILOTS, "Pilot (not a result): `small`, 300 steps (`run.sh pilot pilot_zs_sad`)")
+        + zero_shot_table(PILOTS, "Pilot, zero-shot (not a result)")
+        + speech_table(PILOTS, "Pilot, real speech (not a result)"))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--print", action="store_true", help="print the tables instead of rewriting the README")
+    args = ap.parse_args()
+    text = tables()
+    if args.print:
+        print(text)
+        return
+    readme = HERE / "README.md"
+    old = readme.read_text()
+    new = re.sub(r"(<!-- tables:start -->\n).*(<!-- tables:end -->)", lambda m: m.group(1) + text + "\n" + m.group(2),
+                 old, flags=re.DOTALL)
+    write_text_atomic(readme, new)
+    print(f"tables.py: rewrote the tables of {readme}")
+
+
+if __name__ == "__main__":
+    main()

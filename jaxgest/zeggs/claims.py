@@ -1,0 +1,696 @@
+"""ZeroEGGS's own claims, measured on the **generated** motion against real motion of the same speech (GT) and
+mismatched real motion (MM) (SPEC §5, last bullet; docs/design.md §5).
+
+The paper judges its generator by three user studies -- naturalness, appropriateness to the speech and style
+portrayal, each against GT and MM -- and by zero-shot styles (a style never seen in training reproduced from
+one example). On the built-in synthetic data GT and MM exist exactly, so each claim becomes an objective
+measure here. The setting: a model trained on the clips of one script set (``--data``, e.g. ``jaxgest synth
+--seed 0``) and held-out script datasets (``jaxgest synth --seed K``, K >= 1: the same contents and styles,
+new speech, stroke timings and performances). For every held-out clip (content c, style s, dataset k) the
+model generates from the clip's speech with a style example of style s taken from the *training* scripts and
+*another content* (:func:`claim_items`), so neither the example's timing nor its gestures can leak.
+
+1. **Style portrayal** (:func:`style_portrayal`): an independent style classifier (:class:`StyleClassifier`:
+   closed-form ridge on raw window statistics -- mean and std over 2 s windows every 0.5 s of root-frame joint
+   positions and velocities -- fitted on the real training-script clips, no network) labels every window of
+   the generated motion; accuracy per style beside GT (the real held-out clip) and MM (the real held-out clip
+   of the same content in another style). Holds when generated >= 0.9 x GT and the lower 95 % bound of
+   generated - MM is above half of GT - MM ("far above MM").
+2. **Zero-shot styles** (:func:`zero_shot`): for a model trained without a style (``exclude_styles``), its
+   per-style portrayal against >= 0.5 x GT, and whether its style embeddings collapse onto a training style:
+   the median distance of its windows' embeddings to the nearest training-style centroid against the
+   training styles' own spread (median distance of their windows to their own centroid).
+3. **Realism** (:func:`realism`): per held-out dataset k, the Fréchet distance of the generated clips' motion
+   features to the real clips of k, divided by the median over the other script sets j (the other held-out
+   datasets and the training data) of the real clips of j to the real clips of k; geometric mean over
+   datasets, holds when <= 1.0 (the paper: ZeroEGGS tied MM on naturalness).
+4. **Appropriateness** (:func:`appropriateness`): BeatAlign of the generated motion against its speech's
+   onsets, against BeatAlign of real other-script motion of the same content and style (the training clip)
+   scored against the same speech (MM), and against circularly shifted onsets (shuffled). Holds when the
+   lower 95 % bound of generated - MM is above 0 and generated beats its shuffled control.
+5. **Real speech** (:func:`real_speech`): real recordings cut into segments, generated in two styles;
+   BeatAlign against real synthetic motion of the style (MM) on the same segment, and the classifier's share
+   of windows recognised as the example's style.
+
+Intervals: per-clip values are averaged per dataset; means, standard errors and 95 % normal intervals over
+datasets (:func:`jaxgest.zeggs.probes.mean_se`; over clips when there is one dataset). A clip is not an
+independent unit of a dataset's script, a dataset is.
+
+``substitute`` (:func:`substitute_motion`) replaces the generated motion by real motion -- ``gt`` (the held-out
+clip itself: every claim must hold), ``mm-style`` (another style: style portrayal must fail) or
+``mm-script`` (the same style performed to another script: appropriateness must fail) -- a check of the
+evaluation itself.
+
+References: Ghorbani et al. 2023, §5.1 (zero-shot style), §5.3 (user studies: naturalness, appropriateness,
+style portrayal against GT and MM); Li et al. 2021 (BeatAlign); Heusel et al. 2017 (Fréchet distance);
+SPEC §5.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import pathlib
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from jaxgest import metrics
+from jaxgest.runtime.errors import DataError
+from jaxgest.zeggs.probes import PROBE_STRIDE_S, PROBE_WINDOW_S, mean_se
+
+#: Decision thresholds of the claims (written before any run; experiments/zeggs_claims/README.md).
+STYLE_RATIO = 0.9  # generated accuracy >= 0.9 x GT accuracy
+FAR_ABOVE_MM = 0.5  # lower 95 % bound of generated - MM > 0.5 x (GT - MM)
+ZERO_SHOT_RATIO = 0.5  # left-out style accuracy >= 0.5 x GT accuracy
+REALISM_MAX = 1.0  # geometric mean of the Fréchet ratio <= 1
+RATIO_FLOOR = 1e-6  # a Fréchet ratio of 0 (the real clips themselves) enters the geometric mean as this
+SUBSTITUTES = ("gt", "mm-style", "mm-script")
+SPEECH_STYLES = ("energetic", "sad")
+
+
+# --------------------------------------------------------------------------------------------------------
+# Features and the independent style classifier
+
+
+def frame_features(motion, cache: dict | None = None) -> np.ndarray:
+    """Per-frame root-frame joint positions and velocities ``(F, 6J)`` (the Fréchet distance's features,
+    :func:`jaxgest.zeggs.evaluate.motion_statistics_features`). ``cache``: a dict (owned by the caller) that
+    keeps each motion's features for reuse within one evaluation."""
+    from jaxgest.zeggs.evaluate import motion_statistics_features
+
+    if cache is None:
+        return motion_statistics_features(motion)
+    if id(motion) not in cache:
+        cache[id(motion)] = (motion, motion_statistics_features(motion))  # the motion kept alive with its id
+    return cache[id(motion)][1]
+
+
+def window_statistics(motion, *, window_s: float = PROBE_WINDOW_S, stride_s: float = PROBE_STRIDE_S,
+                      cache: dict | None = None) -> np.ndarray:
+    """Raw window statistics ``(W, 12J)``: mean and std of :func:`frame_features` over windows of ``window_s``
+    seconds every ``stride_s`` seconds (at least one window; a shorter clip is one window)."""
+    f = frame_features(motion, cache)
+    n = max(2, int(round(window_s * motion.fps)))
+    stride = max(1, int(round(stride_s * motion.fps)))
+    starts = list(range(0, max(1, len(f) - n + 1), stride)) or [0]
+    return np.stack([np.concatenate([f[s:s + n].mean(0), f[s:s + n].std(0)]) for s in starts])
+
+
+@dataclasses.dataclass
+class StyleClassifier:
+    """The independent judge of style: a closed-form ridge classifier
+    (:func:`jaxgest.metrics.linear_probe_predict`) on :func:`window_statistics` of real clips.
+
+    References: the style-portrayal study of Ghorbani et al. 2023, §5.3, as an objective stand-in; the
+    raw-statistics control of :mod:`jaxgest.zeggs.probes`.
+    """
+
+    features: np.ndarray  # (N, D) training windows
+    labels: list  # (N,) their clips' styles
+
+    @classmethod
+    def fit(cls, clips, cache: dict | None = None) -> StyleClassifier:
+        """Fitted on every window of ``clips`` (real clips of the training scripts; >= 2 styles)."""
+        clips = list(clips)
+        if len({c.style for c in clips}) < 2:
+            raise DataError("style classifier: the training clips need at least two styles")
+        feats = [window_statistics(c.motion, cache=cache) for c in clips]
+        return cls(np.concatenate(feats), [c.style for c, f in zip(clips, feats) for _ in range(len(f))])
+
+    @property
+    def styles(self) -> list:
+        return sorted(set(self.labels), key=str)
+
+    def predict(self, motions, cache: dict | None = None) -> list[list]:
+        """Per motion, the style predicted for each of its windows (one fit for all of them)."""
+        feats = [window_statistics(m, cache=cache) for m in motions]
+        if not feats:
+            return []
+        if feats[0].shape[1] != self.features.shape[1]:
+            raise DataError(f"style classifier: motion features have {feats[0].shape[1]} dims, the classifier "
+                            f"was fitted on {self.features.shape[1]} (another rig?)")
+        pred = metrics.linear_probe_predict(self.features, self.labels, np.concatenate(feats))
+        out, k = [], 0
+        for f in feats:
+            out.append(list(pred[k:k + len(f)]))
+            k += len(f)
+        return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# The evaluation set
+
+
+@dataclasses.dataclass
+class Item:
+    """One held-out clip and its partners: ``example`` (training-script clip, same style, another content:
+    the style example), ``mm_style`` (same dataset and content, another style) and ``mm_script`` (training
+    clip of the same content and style: the same performance to another script)."""
+
+    dataset: str
+    clip: object
+    example: object
+    mm_style: object
+    mm_script: object
+
+
+def claim_items(train_clips, datasets) -> list[Item]:
+    """The :class:`Item` of every clip with audio of every held-out dataset ``(name, clips)``.
+
+    Partners are chosen deterministically: the example is the training clip of the same style whose content
+    follows the clip's in sorted order (cyclically; any other content when that one is missing); ``mm_style``
+    the clip of the same content whose style follows in sorted order; ``mm_script`` the training clip of the
+    same content and style (else any of the style). Raises :class:`DataError` when a partner cannot exist."""
+    train = sorted(train_clips, key=lambda c: (str(c.content), str(c.style), str(c.path)))
+    if not train:
+        raise DataError("claims: no training clips")
+    items = []
+    for name, clips in datasets:
+        clips = sorted([c for c in clips if c.audio is not None], key=lambda c: (str(c.content), str(c.style)))
+        if not clips:
+            raise DataError(f"{name}: no held-out clip with audio")
+        for c in clips:
+            same_style = [t for t in train if t.style == c.style]
+            if not same_style:
+                raise DataError(f"{name}: style {c.style!r} has no clip in the training data (needed as the example)")
+            other = [t for t in same_style if t.content != c.content]
+            if not other:
+                raise DataError(f"{name}: style {c.style!r} has no training clip of another content than {c.content!r}")
+            after = [t for t in other if str(t.content) > str(c.content)]
+            example = (after or other)[0]
+            peers = sorted([o for o in clips if o.content == c.content and o.style != c.style], key=lambda o: str(o.style))
+            if not peers:
+                raise DataError(f"{name}: content {c.content!r} has one style only (no mismatched-style clip)")
+            later = [o for o in peers if str(o.style) > str(c.style)]
+            mm_style = (later or peers)[0]
+            script = [t for t in same_style if t.content == c.content] or same_style
+            items.append(Item(str(name), c, example, mm_style, script[0]))
+    return items
+
+
+def substitute_motion(item: Item, kind: str):
+    """The real motion that replaces the generated one in a check of the evaluation: ``gt`` (the held-out
+    clip), ``mm-style`` (another style, same script) or ``mm-script`` (same style, another script)."""
+    if kind == "gt":
+        return item.clip.motion
+    if kind == "mm-style":
+        return item.mm_style.motion
+    if kind == "mm-script":
+        return item.mm_script.motion
+    raise DataError(f"claims: unknown substitute {kind!r}; choose from {', '.join(SUBSTITUTES)}")
+
+
+def generate_items(model, items, *, seed: int = 0, progress: bool = False) -> list:
+    """The model's motion for every item: its clip's speech in the style of its example."""
+    from tqdm.auto import tqdm
+
+    from jaxgest.motion.datasets import load_clip_audio
+
+    out = []
+    for it in tqdm(items, desc="claims: generate", disable=not progress, leave=False):
+        audio, sr = load_clip_audio(it.clip)
+        out.append(model.generate(audio, [it.example.motion], sr=sr, seed=seed, name=f"{it.clip.path.stem}_gen"))
+    return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# Intervals
+
+
+def by_dataset(values, units) -> tuple[list, np.ndarray]:
+    """Per-dataset means of per-clip ``values`` (NaN skipped): ``(names, means)``."""
+    values, units = np.asarray(values, np.float64), list(units)
+    names = sorted(set(units), key=str)
+    means = []
+    for n in names:
+        v = values[[i for i, u in enumerate(units) if u == n]]
+        means.append(float(v[np.isfinite(v)].mean()) if np.isfinite(v).any() else float("nan"))
+    return names, np.asarray(means)
+
+
+def interval(values, units, unit_name: str = "dataset") -> dict:
+    """Mean, SE and 95 % interval of per-clip ``values`` over datasets (``unit``: "dataset"), or over clips
+    when they come from one dataset (``unit``: "clip"; ``unit_name`` names the units, e.g. "segment");
+    ``low`` / ``high`` the 95 % bounds. Non-finite values
+    (a clip without kinematic beats) are skipped; none left gives NaNs (and ``n`` 0)."""
+    values = np.asarray(values, np.float64)
+    names, means = by_dataset(values, units)
+    d = means if len(names) > 1 else values
+    d = d[np.isfinite(d)]
+    if len(d) == 0:  # e.g. motion without a kinematic beat: no value, so no claim can hold on it
+        nan = float("nan")
+        return {"mean": nan, "standard_error": nan, "ci95_half_width": nan, "z": None, "n": 0,
+                "unit": unit_name if len(names) > 1 else "clip", "low": nan, "high": nan}
+    s = mean_se(d)
+    s.update({"unit": unit_name if len(names) > 1 else "clip", "low": s["mean"] - s["ci95_half_width"],
+              "high": s["mean"] + s["ci95_half_width"]})
+    return s
+
+
+# --------------------------------------------------------------------------------------------------------
+# 1. Style portrayal
+
+
+def clip_accuracy(predictions, label) -> float:
+    """Share of a clip's window predictions equal to ``label``."""
+    return float(np.mean([p == label for p in predictions])) if predictions else float("nan")
+
+
+def style_portrayal(classifier: StyleClassifier, items, generated, cache: dict | None = None) -> dict:
+    """Criterion 1: the classifier's accuracy (the item's style as the label) on the generated motion, on GT
+    (the real held-out clips) and on MM (the real held-out clips of another style), per clip, per style and
+    overall with intervals over datasets; the paired difference generated - MM; the verdict
+    (``holds``: generated >= :data:`STYLE_RATIO` x GT and the lower bound of generated - MM above
+    :data:`FAR_ABOVE_MM` x (GT - MM)). ``confusion``: per style, the count of generated windows per predicted
+    style."""
+    if len(generated) != len(items):
+        raise DataError(f"style portrayal: {len(generated)} motions for {len(items)} items")
+    labels, units = [it.clip.style for it in items], [it.dataset for it in items]
+    preds = {"generated": classifier.predict(generated, cache),
+             "gt": classifier.predict([it.clip.motion for it in items], cache),
+             "mm": classifier.predict([it.mm_style.motion for it in items], cache)}
+    acc = {k: np.array([clip_accuracy(p, y) for p, y in zip(v, labels)]) for k, v in preds.items()}
+    out = {k: interval(v, units) for k, v in acc.items()}
+    out["generated_minus_mm"] = interval(acc["generated"] - acc["mm"], units)
+    out["generated_minus_gt"] = interval(acc["generated"] - acc["gt"], units)
+    per_style, confusion = {}, {}
+    for s in sorted(set(labels), key=str):
+        idx = [i for i, y in enumerate(labels) if y == s]
+        per_style[s] = {k: float(np.mean(v[idx])) for k, v in acc.items()}
+        per_style[s]["clips"] = len(idx)
+        per_style[s]["ratio"] = per_style[s]["generated"] / per_style[s]["gt"] if per_style[s]["gt"] > 0 else None
+        confusion[s] = dict(collections.Counter(p for i in idx for p in preds["generated"][i]))
+    out["per_style"], out["confusion"] = per_style, confusion
+    g, t, m = out["generated"]["mean"], out["gt"]["mean"], out["mm"]["mean"]
+    out["ratio_to_gt"] = g / t if t > 0 else None
+    out["holds"] = bool(t > 0 and g >= STYLE_RATIO * t and out["generated_minus_mm"]["low"] > FAR_ABOVE_MM * (t - m))
+    out["rule"] = (f"generated >= {STYLE_RATIO} x GT and lower 95 % bound of (generated - MM) > "
+                   f"{FAR_ABOVE_MM} x (GT - MM)")
+    out["classifier"] = {"features": "mean + std over windows of root-frame joint positions and velocities",
+                         "window_s": PROBE_WINDOW_S, "stride_s": PROBE_STRIDE_S, "training_windows": len(classifier.labels),
+                         "styles": classifier.styles}
+    return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# 2. Zero-shot styles
+
+
+def embedding_collapse(train_embeddings: dict, left_out) -> dict:
+    """Whether the embeddings of a style left out of training collapse onto a training style.
+
+    train_embeddings: training style -> ``(N_s, D_e)`` window embeddings; left_out: ``(N, D_e)`` embeddings of
+    the left-out style. Returns the median distance of the left-out windows to the nearest training-style
+    centroid, the training styles' own spread (median distance of their windows to their own centroid), their
+    ratio (``separation``: > 1 = the left-out style sits farther from every training style than a training
+    style's windows sit from their own centre) and the nearest training style of each left-out window
+    (counts). References: Ghorbani et al. 2023, §5.1 (zero-shot style), §5.2 (embedding space)."""
+    if not train_embeddings:
+        raise DataError("zero-shot: no training-style embeddings")
+    names = sorted(train_embeddings, key=str)
+    cents = np.stack([np.asarray(train_embeddings[s], np.float64).mean(0) for s in names])
+    own = np.concatenate([np.linalg.norm(np.asarray(train_embeddings[s], np.float64) - cents[i], axis=1)
+                          for i, s in enumerate(names)])
+    x = np.asarray(left_out, np.float64)
+    if x.ndim != 2 or len(x) == 0 or x.shape[1] != cents.shape[1]:
+        raise DataError(f"zero-shot: left-out embeddings of shape {x.shape}, expected (N, {cents.shape[1]})")
+    d = np.linalg.norm(x[:, None] - cents[None], axis=-1)
+    nearest = d.min(1)
+    spread = float(np.median(own))
+    return {"nearest_centroid_distance": float(np.median(nearest)), "training_spread": spread,
+            "separation": float(np.median(nearest) / spread) if spread > 0 else None,
+            "nearest_style_counts": dict(collections.Counter(names[k] for k in d.argmin(1))),
+            "windows": len(x)}
+
+
+def style_embeddings(model, clips) -> dict:
+    """Style -> posterior means ``(W, D_e)`` of the probe windows of ``clips`` (2 s every 0.5 s)."""
+    from jaxgest.zeggs.probes import _windows, encode_windows
+
+    by = collections.defaultdict(list)
+    xs = [_windows(model, c, PROBE_WINDOW_S, PROBE_STRIDE_S) for c in clips]
+    for c, e in zip(clips, encode_windows(model, xs)):
+        by[c.style].append(e)
+    return {s: np.concatenate(v) for s, v in by.items()}
+
+
+def zero_shot(portrayal: dict, style: str, embeddings: dict | None = None) -> dict:
+    """Criterion 2 for the left-out ``style``: its accuracy in :func:`style_portrayal`'s ``per_style`` against
+    :data:`ZERO_SHOT_RATIO` x its GT accuracy, and (``embeddings``: style -> window embeddings of held-out
+    clips, e.g. :func:`style_embeddings`) :func:`embedding_collapse` against the other styles. ``holds``:
+    the accuracy rule and, when embeddings are given, separation > 1."""
+    if style not in portrayal["per_style"]:
+        raise DataError(f"zero-shot: style {style!r} has no held-out clip")
+    p = portrayal["per_style"][style]
+    out = {"style": style, "generated": p["generated"], "gt": p["gt"], "mm": p["mm"], "ratio": p["ratio"],
+           "rule": f"generated >= {ZERO_SHOT_RATIO} x GT (the left-out style) and embedding separation > 1"}
+    ok = p["gt"] > 0 and p["generated"] >= ZERO_SHOT_RATIO * p["gt"]
+    if embeddings is not None:
+        if style not in embeddings:
+            raise DataError(f"zero-shot: no embeddings of style {style!r}")
+        out["embedding"] = embedding_collapse({s: e for s, e in embeddings.items() if s != style}, embeddings[style])
+        ok = ok and (out["embedding"]["separation"] or 0.0) > 1.0
+    out["holds"] = bool(ok)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# 3. Realism
+
+
+def realism(items, generated, train_clips, cache: dict | None = None) -> dict:
+    """Criterion 3: per held-out dataset k, FD(generated of k, real of k) / median_j FD(real of j, real of k),
+    j over the other held-out datasets and the training clips (real other-script motion); the geometric mean
+    over datasets with a 95 % interval of the mean log ratio; ``holds`` when the geometric mean <=
+    :data:`REALISM_MAX`. Features: :func:`frame_features` of every frame."""
+    if len(generated) != len(items):
+        raise DataError(f"realism: {len(generated)} motions for {len(items)} items")
+    names = sorted({it.dataset for it in items}, key=str)
+    real = {n: np.concatenate([frame_features(it.clip.motion, cache) for it in items if it.dataset == n])
+            for n in names}
+    gen = {n: np.concatenate([frame_features(m, cache) for it, m in zip(items, generated) if it.dataset == n])
+           for n in names}
+    others = dict(real)
+    train_name = "training scripts"
+    others[train_name] = np.concatenate([frame_features(c.motion, cache) for c in train_clips])
+    stats = {k: metrics.gaussian_statistics(v) for k, v in others.items()}
+    per = {}
+    for n in names:
+        fd = metrics.frechet_distance(gen[n], real[n])
+        ctrl = [metrics.frechet_distance_from_statistics(*stats[j], *stats[n]) for j in others if j != n]
+        med = float(np.median(ctrl))
+        per[n] = {"generated": fd, "control_median": med, "control_min": float(min(ctrl)),
+                  "control_max": float(max(ctrl)), "controls": len(ctrl), "ratio": fd / med if med > 0 else None}
+    if any(p["ratio"] is None for p in per.values()):
+        raise DataError("realism: a control distance is 0 (identical real datasets?)")
+    logs = [np.log(max(p["ratio"], RATIO_FLOOR)) for p in per.values()]
+    s = mean_se(logs)
+    geo = float(np.exp(s["mean"]))
+    return {"per_dataset": per, "geometric_mean_ratio": geo,
+            "ratio_low": float(np.exp(s["mean"] - s["ci95_half_width"])),
+            "ratio_high": float(np.exp(s["mean"] + s["ci95_half_width"])), "log_ratio": s,
+            "holds": bool(geo <= REALISM_MAX), "rule": f"geometric mean over datasets of the ratio <= {REALISM_MAX}",
+            "features": "root-frame joint positions and velocities, every frame"}
+
+
+# --------------------------------------------------------------------------------------------------------
+# 4. Appropriateness
+
+
+def motion_beats(motion) -> np.ndarray:
+    """Kinematic beat times (s) of a motion: minima of its smoothed summed hand speed."""
+    from jaxgest.motion import body, kinematics
+
+    pos = kinematics.forward_kinematics(motion)
+    speed = metrics.hand_speed(pos, motion.fps, body.joint_indices(motion.skeleton, body.HANDS))
+    return metrics.kinematic_beats(speed, motion.fps)
+
+
+def beat_align(motion, onsets, *, max_s: float | None = None) -> float:
+    """BeatAlign of ``motion``'s beats (those before ``max_s`` s when given) against ``onsets``; NaN when the
+    motion has no beat."""
+    b = motion_beats(motion)
+    if max_s is not None:
+        b = b[b < max_s]
+    return metrics.beat_alignment(b, onsets) if len(b) else float("nan")
+
+
+def appropriateness(items, generated, *, seed: int = 0) -> dict:
+    """Criterion 4: per held-out clip, BeatAlign against its speech's onsets of the generated motion, of GT
+    (the real clip), of MM (real other-script motion of the same content and style: ``mm_script``) and of the
+    generated motion against shifted onsets (shuffled, :func:`jaxgest.metrics.shuffled_beat_alignment`); the
+    paired differences generated - MM, generated - shuffled and GT - MM with intervals over datasets.
+    ``holds``: lower 95 % bound of generated - MM > 0 and of generated - shuffled > 0."""
+    from jaxgest.motion.datasets import load_clip_audio
+
+    if len(generated) != len(items):
+        raise DataError(f"appropriateness: {len(generated)} motions for {len(items)} items")
+    rows = []
+    for it, g in zip(items, generated):
+        audio, sr = load_clip_audio(it.clip)
+        onsets = metrics.onset_times(audio, sr)
+        duration = len(audio) / sr
+        gb = motion_beats(g)
+        shuffled = (metrics.shuffled_beat_alignment(gb, onsets, duration, seed=seed) if len(gb) and duration > 0
+                    else float("nan"))
+        rows.append({"generated": beat_align(g, onsets), "gt": beat_align(it.clip.motion, onsets),
+                     "mm": beat_align(it.mm_script.motion, onsets, max_s=duration), "shuffled": shuffled})
+    units = [it.dataset for it in items]
+    col = {k: np.array([r[k] for r in rows]) for k in ("generated", "gt", "mm", "shuffled")}
+    out = {k: interval(v, units) for k, v in col.items()}
+    out["generated_minus_mm"] = interval(col["generated"] - col["mm"], units)
+    out["generated_minus_shuffled"] = interval(col["generated"] - col["shuffled"], units)
+    out["gt_minus_mm"] = interval(col["gt"] - col["mm"], units)
+    out["clips_without_beats"] = int(np.sum(~np.isfinite(col["generated"])))
+    out["holds"] = bool(out["generated_minus_mm"]["low"] > 0 and out["generated_minus_shuffled"]["low"] > 0)
+    out["rule"] = "lower 95 % bound of (generated - MM) > 0 and of (generated - shuffled) > 0"
+    out["sigma_s"] = 0.1
+    return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# 5. Real speech
+
+
+def speech_segments(path, segment_s: float) -> list[tuple]:
+    """``(samples, sr, start_s)`` of consecutive ``segment_s``-second segments of a speech file (a last
+    segment shorter than half of it is dropped; a file shorter than that is one segment)."""
+    from jaxgest.audio import load_audio
+
+    y, sr = load_audio(path)
+    n = int(round(segment_s * sr))
+    if n < 1:
+        raise DataError(f"{path}: segment length {segment_s} s is too short")
+    segs = [(y[s:s + n], sr, s / sr) for s in range(0, len(y), n) if len(y[s:s + n]) >= n // 2]
+    if not segs:
+        segs = [(y, sr, 0.0)]
+    return segs
+
+
+def real_speech(model, wavs, train_clips, *, styles: Sequence[str] = SPEECH_STYLES, segment_s: float = 10.0,
+                seed: int = 0, classifier: StyleClassifier | None = None, progress: bool = False) -> dict:
+    """Criterion 5: gestures generated from real speech files in each of ``styles`` (the example: the first
+    training clip of the style, by content), per ``segment_s``-second segment. Per style: BeatAlign of the
+    generated motion against the segment's onsets, of MM (real training clips of the style, cycled, scored
+    against the same onsets) and of the generated motion against shifted onsets, with paired differences and
+    intervals over segments; and the classifier's share of generated windows recognised as the style (with
+    the counts of every predicted style). ``holds`` per style: lower 95 % bound of generated - MM > 0."""
+    from tqdm.auto import tqdm
+
+    train = sorted(train_clips, key=lambda c: (str(c.content), str(c.path)))
+    classifier = classifier or StyleClassifier.fit(train)
+    segments = []
+    for w in wavs:
+        if not pathlib.Path(w).is_file():
+            raise DataError(f"{w}: no such speech file")
+        segments += [(str(w), *s) for s in speech_segments(w, segment_s)]
+    out = {"files": [str(w) for w in wavs], "segments": len(segments), "segment_s": segment_s, "styles": {}}
+    missing = [s for s in styles if s not in {c.style for c in train}]
+    if missing:
+        raise DataError(f"real speech: no training clip of the style(s) {', '.join(missing)}")
+    for style in styles:
+        pool = [c for c in train if c.style == style]
+        rows, motions = [], []
+        for i, (w, y, sr, t0) in enumerate(tqdm(segments, desc=f"claims: speech ({style})", disable=not progress,
+                                              leave=False)):
+            g = model.generate(y, [pool[0].motion], sr=sr, seed=seed, name=f"speech_{style}_{i}")
+            onsets = metrics.onset_times(y, sr)
+            duration = len(y) / sr
+            gb = motion_beats(g)
+            rows.append({"file": w, "start_s": t0, "generated": beat_align(g, onsets),
+                         "mm": beat_align(pool[i % len(pool)].motion, onsets, max_s=duration),
+                         "shuffled": metrics.shuffled_beat_alignment(gb, onsets, duration, seed=seed)
+                         if len(gb) else float("nan")})
+            motions.append(g)
+        units = [f"segment-{i}" for i in range(len(rows))]  # segments are the units
+        col = {k: np.array([r[k] for r in rows]) for k in ("generated", "mm", "shuffled")}
+        res = {k: interval(v, units, "segment") for k, v in col.items()}
+        res["generated_minus_mm"] = interval(col["generated"] - col["mm"], units, "segment")
+        res["generated_minus_shuffled"] = interval(col["generated"] - col["shuffled"], units, "segment")
+        preds = [p for ps in classifier.predict(motions) for p in ps]
+        res["recognised"] = clip_accuracy(preds, style)
+        res["predicted_counts"] = dict(collections.Counter(preds))
+        res["example"] = str(pool[0].path)
+        res["holds"] = bool(res["generated_minus_mm"]["low"] > 0)
+        out["styles"][style] = res
+    out["rule"] = "per style: lower 95 % bound over segments of (generated - MM) > 0"
+    return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# All together
+
+
+def evaluate_claims(model, train_clips, datasets, *, seed: int = 0, substitute: str | None = None,
+                    exclude_styles: Sequence[str] = (), progress: bool = False,
+                    generate: Callable | None = None) -> dict:
+    """Criteria 1, 3 and 4 (and 2 for every style in ``exclude_styles``, the styles the model never saw)
+    on held-out ``datasets`` (``(name, clips)`` pairs); ``train_clips``: the real training-script clips
+    (classifier, examples, MM). ``substitute`` (:data:`SUBSTITUTES`) replaces the generated motion by real
+    motion (a check of the evaluation; ``model`` may then be None); ``generate(items) -> motions``
+    replaces the model's generation (tests)."""
+    train_clips = list(train_clips)
+    items = claim_items(train_clips, datasets)
+    if substitute is not None:
+        motions = [substitute_motion(it, substitute) for it in items]
+    elif generate is not None:
+        motions = list(generate(items))
+    else:
+        if model is None:
+            raise DataError("claims: no model and no substitute")
+        motions = generate_items(model, items, seed=seed, progress=progress)
+    cache = {}  # motion features, computed once per motion within this evaluation
+    classifier = StyleClassifier.fit(train_clips, cache)
+    portrayal = style_portrayal(classifier, items, motions, cache)
+    out = {"source": substitute or "generated", "datasets": sorted({it.dataset for it in items}, key=str),
+           "clips": len(items), "style_portrayal": portrayal, "realism": realism(items, motions, train_clips, cache),
+           "appropriateness": appropriateness(items, motions, seed=seed)}
+    if exclude_styles:
+        emb = None
+        if model is not None and substitute is None:
+            emb = style_embeddings(model, [it.clip for it in items])
+        out["zero_shot"] = {s: zero_shot(portrayal, s, emb) for s in exclude_styles}
+    return out
+
+
+def heldout_datasets(dirs=(), seeds: int = 0, *, tmp_dir=None, progress: bool = False) -> list:
+    """``(name, clips)`` of each held-out folder of ``dirs`` (named by its path), then of the built-in
+    synthetic data of seeds 1..``seeds`` written into ``tmp_dir`` (named ``synth-seed-K``)."""
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.motion.synthetic.dataset import write_dataset
+
+    out = []
+    for d in dirs or ():
+        if not pathlib.Path(d).is_dir():
+            raise DataError(f"{d}: no such held-out data folder")
+        clips = [c for c in load_folder(d) if c.audio is not None]
+        if not clips:
+            raise DataError(f"{d}: no held-out clip with audio")
+        out.append((str(d), clips))
+    if seeds < 0:
+        raise DataError(f"--heldout-seeds must be >= 0, got {seeds}")
+    for k in range(1, seeds + 1):
+        folder = pathlib.Path(tmp_dir) / f"seed{k}"
+        write_dataset(folder, seed=k, progress=False)
+        out.append((f"synth-seed-{k}", load_folder(folder)))
+    if len({n for n, _ in out}) != len(out):
+        raise DataError("claims: the same held-out folder is named twice")
+    return out
+
+
+# --------------------------------------------------------------------------------------------------------
+# Report
+
+
+def _ci(s: dict) -> str:
+    return f"{s['mean']:.3f} [{s['low']:.3f}, {s['high']:.3f}]"
+
+
+def _verdict(ok) -> str:
+    return "**holds**" if ok else "**does not hold**"
+
+
+def markdown(result: dict) -> str:
+    """Markdown tables of :func:`evaluate_claims` / :func:`real_speech` results (``result`` may hold
+    ``claims`` and ``real_speech``), GT and MM beside the model."""
+    lines = []
+    c = result.get("claims")
+    if c:
+        sp, re_, ap = c["style_portrayal"], c["realism"], c["appropriateness"]
+        unit = sp["generated"]["unit"]
+        lines += [f"Claims on {c['clips']} held-out clips of {len(c['datasets'])} dataset(s), motion: {c['source']}; "
+                  f"95 % intervals over {unit}s.", "",
+                  "| claim | model | GT | MM | verdict |", "|---|---:|---:|---:|---|",
+                  f"| 1. style portrayal: classifier accuracy | {_ci(sp['generated'])} | {_ci(sp['gt'])} | "
+                  f"{_ci(sp['mm'])} | {_verdict(sp['holds'])} ({sp['rule']}; ratio to GT "
+                  f"{sp['ratio_to_gt'] if sp['ratio_to_gt'] is None else round(sp['ratio_to_gt'], 3)}) |",
+                  f"| 3. realism: Fréchet / median real other-script (geometric mean) | {re_['geometric_mean_ratio']:.3f} "
+                  f"[{re_['ratio_low']:.3f}, {re_['ratio_high']:.3f}] | 0 | 1 (by definition) | "
+                  f"{_verdict(re_['holds'])} ({re_['rule']}) |",
+                  f"| 4. appropriateness: BeatAlign vs the speech | {_ci(ap['generated'])} | {_ci(ap['gt'])} | "
+                  f"{_ci(ap['mm'])} | {_verdict(ap['holds'])} ({ap['rule']}) |",
+                  f"| 4. generated - MM / - shuffled ({_ci(ap['shuffled'])}) | {_ci(ap['generated_minus_mm'])} / "
+                  f"{_ci(ap['generated_minus_shuffled'])} | GT - MM {_ci(ap['gt_minus_mm'])} | | |", "",
+                  "| style | generated | GT | MM | ratio | most predicted (generated) |", "|---|---:|---:|---:|---:|---|"]
+        for s, p in sp["per_style"].items():
+            top = max(sp["confusion"][s].items(), key=lambda kv: kv[1])[0] if sp["confusion"][s] else ""
+            r = "" if p["ratio"] is None else f"{p['ratio']:.2f}"
+            lines.append(f"| {s} | {p['generated']:.3f} | {p['gt']:.3f} | {p['mm']:.3f} | {r} | {top} |")
+        lines.append("")
+        for s, z in (c.get("zero_shot") or {}).items():
+            e = z.get("embedding")
+            sep = "n/a" if not e or e["separation"] is None else f"{e['separation']:.2f}"
+            extra = "" if not e else (f"; embedding: nearest training centroid {e['nearest_centroid_distance']:.3f} vs "
+                                      f"training spread {e['training_spread']:.3f} (separation {sep})")
+            r = "n/a" if z["ratio"] is None else f"{z['ratio']:.2f}"
+            lines.append(f"2. zero-shot `{s}`: generated {z['generated']:.3f} vs GT {z['gt']:.3f} (ratio {r}){extra}: "
+                         f"{_verdict(z['holds'])}")
+        if c.get("zero_shot"):
+            lines.append("")
+    rs = result.get("real_speech")
+    if rs:
+        lines += [f"Real speech: {rs['segments']} segments of {rs['segment_s']:g} s from {len(rs['files'])} file(s); "
+                  "95 % intervals over segments.", "",
+                  "| style | BeatAlign generated | MM (real synthetic motion) | shuffled | generated - MM | "
+                  "classifier: share recognised | verdict |", "|---|---:|---:|---:|---:|---:|---|"]
+        for s, r in rs["styles"].items():
+            lines.append(f"| {s} | {_ci(r['generated'])} | {_ci(r['mm'])} | {_ci(r['shuffled'])} | "
+                         f"{_ci(r['generated_minus_mm'])} | {r['recognised']:.3f} | {_verdict(r['holds'])} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def run(workdir, data_dir, *, heldout=(), heldout_seeds: int = 0, speech=(), speech_styles=SPEECH_STYLES,
+        segment_s: float = 10.0, seed: int = 0, substitute: str | None = None, progress: bool = True) -> tuple:
+    """``jaxgest zeggs evaluate --claims``: the trained model of ``workdir``, its training-script clips
+    ``data_dir`` (the classifier, examples, MM), held-out folders ``heldout`` and synthetic seeds
+    1..``heldout_seeds`` (criteria 1, 3, 4 and 2 for the model's ``exclude_styles``), and speech files
+    ``speech`` (criterion 5). Returns ``(result, config)``: the results and the resolved settings for the
+    stamp (:func:`jaxgest.runtime.provenance.write_results`)."""
+    import tempfile
+
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.zeggs.inference import load_model
+
+    if not (heldout or heldout_seeds or speech):
+        raise DataError("--claims needs held-out data (--heldout DIR... or --heldout-seeds N) or --speech WAV...")
+    if substitute is not None and substitute not in SUBSTITUTES:
+        raise DataError(f"--substitute {substitute!r}: choose from {', '.join(SUBSTITUTES)}")
+    if not segment_s > 0:
+        raise DataError(f"--segment-seconds must be > 0, got {segment_s}")
+    for w in speech:
+        if not pathlib.Path(w).is_file():
+            raise DataError(f"{w}: no such speech file")
+    for d in heldout:
+        if not pathlib.Path(d).is_dir():
+            raise DataError(f"{d}: no such held-out data folder")
+    if heldout_seeds < 0:
+        raise DataError(f"--heldout-seeds must be >= 0, got {heldout_seeds}")
+    if not pathlib.Path(data_dir).is_dir():
+        raise DataError(f"{data_dir}: no such data folder")
+    model = load_model(workdir)
+    train = [c for c in load_folder(data_dir) if c.audio is not None]
+    if not train:
+        raise DataError(f"{data_dir}: no training clip with audio")
+    missing = [st for st in (speech_styles if speech else ()) if st not in {c.style for c in train}]
+    if missing:
+        raise DataError(f"{data_dir}: no training clip of the --speech-styles {', '.join(missing)}")
+    excluded = tuple(model.cfg.train.exclude_styles)
+    result = {}
+    if heldout or heldout_seeds:
+        with tempfile.TemporaryDirectory(prefix="jaxgest-claims-") as tmp:
+            sets = heldout_datasets(heldout, heldout_seeds, tmp_dir=tmp, progress=progress)
+            result["claims"] = evaluate_claims(model, train, sets, seed=seed, substitute=substitute,
+                                               exclude_styles=excluded, progress=progress)
+    if speech:
+        result["real_speech"] = real_speech(model, speech, train, styles=speech_styles, segment_s=segment_s,
+                                            seed=seed, progress=progress)
+    config = {"model": model.cfg.to_dict(), "workdir": str(workdir), "checkpoint_step": int(model.step),
+              "training_seed": model.meta.get("seed"), "training_data": str(data_dir),
+              "heldout": [str(d) for d in heldout], "heldout_seeds": heldout_seeds,
+              "speech": [str(w) for w in speech], "speech_styles": list(speech_styles), "segment_s": segment_s,
+              "seed": seed, "substitute": substitute, "exclude_styles": list(excluded),
+              "thresholds": {"style_ratio": STYLE_RATIO, "far_above_mm": FAR_ABOVE_MM,
+                             "zero_shot_ratio": ZERO_SHOT_RATIO, "realism_max": REALISM_MAX}}
+    return result, config

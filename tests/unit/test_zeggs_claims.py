@@ -1,0 +1,161 @@
+"""Unit tests of the measures of ZeroEGGS's claims on the generated motion (jaxgest.zeggs.claims): each measure on
+constructed inputs, and the whole evaluation with the generated motion replaced by real motion -- it must hold for
+GT and FAIL for mismatched real motion (MM) and for damped motion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jaxgest.runtime.errors import DataError
+from jaxgest.zeggs import claims
+
+
+@pytest.fixture(scope="module")
+def sets(tmp_path_factory):
+    """Training scripts (synth seed 0) and one held-out script set (seed 1): 2 contents x 7 styles x 4 s."""
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.motion.synthetic import write_dataset
+
+    root = tmp_path_factory.mktemp("claims")
+    write_dataset(root / "train", clips=14, seconds=4, seed=0, progress=False)
+    write_dataset(root / "held", clips=14, seconds=4, seed=1, progress=False)
+    return load_folder(root / "train"), [("held", load_folder(root / "held"))]
+
+
+def test_interval_units():
+    one = claims.interval([0.2, 0.4, 0.6], ["a", "a", "a"])
+    assert one["unit"] == "clip" and one["mean"] == pytest.approx(0.4) and one["n"] == 3
+    two = claims.interval([0.0, 1.0, 1.0, 1.0], ["a", "a", "b", "b"])  # dataset means 0.5 and 1.0
+    assert two["unit"] == "dataset" and two["mean"] == pytest.approx(0.75) and two["n"] == 2
+    assert two["low"] < 0.75 < two["high"]
+    assert claims.interval([np.nan, 1.0], ["a", "a"])["mean"] == 1.0  # a clip without beats is skipped
+
+
+def test_embedding_collapse_separates_and_collapses():
+    rng = np.random.default_rng(0)
+    train = {"a": rng.normal(0, 0.1, (50, 4)), "b": rng.normal(0, 0.1, (50, 4)) + [3, 0, 0, 0]}
+    far = claims.embedding_collapse(train, rng.normal(0, 0.1, (20, 4)) + [0, 3, 0, 0])
+    assert far["separation"] > 5 and far["windows"] == 20
+    on_b = claims.embedding_collapse(train, rng.normal(0, 0.1, (20, 4)) + [3, 0, 0, 0])
+    assert on_b["separation"] < 1.5 and on_b["nearest_style_counts"] == {"b": 20}
+    with pytest.raises(DataError, match="expected"):
+        claims.embedding_collapse(train, np.zeros((3, 5)))
+
+
+def test_zero_shot_rule():
+    portrayal = {"per_style": {"sad": {"generated": 0.3, "gt": 0.8, "mm": 0.0, "ratio": 0.375}}}
+    assert not claims.zero_shot(portrayal, "sad")["holds"]  # 0.3 < 0.5 x 0.8
+    portrayal["per_style"]["sad"].update(generated=0.5, ratio=0.625)
+    assert claims.zero_shot(portrayal, "sad")["holds"]
+    emb = {"sad": np.zeros((5, 2)), "tense": np.zeros((5, 2)) + 0.01, "calm": np.ones((5, 2))}
+    assert not claims.zero_shot(portrayal, "sad", emb)["holds"]  # collapsed onto "tense"
+    with pytest.raises(DataError, match="no held-out clip"):
+        claims.zero_shot(portrayal, "proud")
+
+
+def test_window_statistics_shape(sets):
+    train, _ = sets
+    m = train[0].motion
+    w = claims.window_statistics(m)
+    assert w.shape == (1 + int((m.num_frames - 2 * m.fps) // (0.5 * m.fps)), 12 * m.skeleton.num_joints)
+
+
+def test_claim_items_partners(sets):
+    train, held = sets
+    items = claims.claim_items(train, held)
+    assert len(items) == 14
+    for it in items:
+        assert it.example.style == it.clip.style and it.example.content != it.clip.content
+        assert it.mm_style.content == it.clip.content and it.mm_style.style != it.clip.style
+        assert it.mm_script.content == it.clip.content and it.mm_script.style == it.clip.style
+        assert it.mm_script.path != it.clip.path
+    with pytest.raises(DataError, match="style 'sad' has no clip in the training data"):
+        claims.claim_items([c for c in train if c.style != "sad"], held)
+
+
+def test_gt_holds_and_mm_fails(sets):
+    train, held = sets
+    gt = claims.evaluate_claims(None, train, held, substitute="gt")
+    sp = gt["style_portrayal"]
+    assert sp["holds"] and sp["ratio_to_gt"] == 1.0 and sp["gt"]["mean"] > sp["mm"]["mean"] + 0.3
+    assert gt["realism"]["holds"] and gt["realism"]["geometric_mean_ratio"] < 1e-3  # the real clips themselves
+    # MM of another style: the classifier's accuracy collapses and the style claim fails
+    mm = claims.evaluate_claims(None, train, held, substitute="mm-style")
+    assert not mm["style_portrayal"]["holds"]
+    assert mm["style_portrayal"]["generated"]["mean"] < 0.5 * sp["generated"]["mean"]
+    # MM of another script: appropriateness cannot beat itself
+    mm = claims.evaluate_claims(None, train, held, substitute="mm-script")
+    ap = mm["appropriateness"]
+    assert not ap["holds"] and ap["generated_minus_mm"]["mean"] == 0.0
+    md = claims.markdown({"claims": mm})
+    assert "does not hold" in md and "| sad |" in md
+
+
+def test_damped_motion_fails_realism_and_style(sets):
+    train, held = sets
+
+    def frozen(items):  # the first pose held still: no gesture at all
+        out = []
+        for it in items:
+            m = it.clip.motion
+            out.append(m.replace(rotations=np.repeat(m.rotations[:1], m.num_frames, 0),
+                                 translations=np.repeat(m.translations[:1], m.num_frames, 0)))
+        return out
+
+    r = claims.evaluate_claims(None, train, held, generate=frozen)
+    assert not r["realism"]["holds"] and r["realism"]["geometric_mean_ratio"] > 2.0
+    assert not r["style_portrayal"]["holds"]
+    assert not r["appropriateness"]["holds"] or r["appropriateness"]["clips_without_beats"] > 0
+
+
+def test_substitute_and_model_errors(sets):
+    train, held = sets
+    with pytest.raises(DataError, match="unknown substitute"):
+        claims.evaluate_claims(None, train, held, substitute="nope")
+    with pytest.raises(DataError, match="no model"):
+        claims.evaluate_claims(None, train, held)
+
+
+def test_speech_segments(tmp_path):
+    import soundfile as sf
+
+    sf.write(tmp_path / "a.wav", np.zeros(16000 * 25, np.float32), 16000)
+    segs = claims.speech_segments(tmp_path / "a.wav", 10.0)
+    assert [round(s[2]) for s in segs] == [0, 10, 20] and len(segs[-1][0]) == 16000 * 5
+    assert len(claims.speech_segments(tmp_path / "a.wav", 60.0)) == 1  # shorter than one segment: one
+
+
+def test_exclude_styles_data_and_override(sets):
+    from jaxgest.zeggs import data as zdata
+    from jaxgest.runtime.config import apply_overrides, parse_overrides
+    from jaxgest.zeggs.config import Config
+
+    train, _ = sets
+    kept = zdata.exclude_styles(train, ("sad", "tense"), "D")
+    assert {c.style for c in kept} == {c.style for c in train} - {"sad", "tense"}
+    assert zdata.exclude_styles(train, (), "D") == list(train)
+    with pytest.raises(DataError, match="D: exclude_styles names style\\(s\\) the data does not have: happy"):
+        zdata.exclude_styles(train, ("happy",), "D")
+    with pytest.raises(DataError, match="leaves no clip"):
+        zdata.exclude_styles(train, tuple({c.style for c in train}), "D")
+    cfg = apply_overrides(Config(), parse_overrides(["train.exclude_styles=sad,left_handed"]), model="ZeroEGGS")
+    assert cfg.train.exclude_styles == ("sad", "left_handed")
+
+
+@pytest.mark.slow
+def test_full_size_substitutes(tmp_path_factory):
+    """At the experiment's size (6 contents x 7 styles x 10 s; two held-out script sets): GT passes every claim,
+    MM of another style fails style portrayal, MM of another script fails appropriateness."""
+    from jaxgest.motion.datasets import load_folder
+    from jaxgest.motion.synthetic import write_dataset
+
+    root = tmp_path_factory.mktemp("claims_full")
+    for k in range(3):
+        write_dataset(root / f"seed{k}", seed=k, progress=False)
+    train = load_folder(root / "seed0")
+    held = [(f"seed{k}", load_folder(root / f"seed{k}")) for k in (1, 2)]
+    gt = claims.evaluate_claims(None, train, held, substitute="gt")
+    assert gt["style_portrayal"]["holds"] and gt["realism"]["holds"] and gt["appropriateness"]["holds"]
+    assert not claims.evaluate_claims(None, train, held, substitute="mm-style")["style_portrayal"]["holds"]
+    assert not claims.evaluate_claims(None, train, held, substitute="mm-script")["appropriateness"]["holds"]

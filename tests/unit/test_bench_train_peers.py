@@ -1,0 +1,57 @@
+"""Training-step and torch.compile peers of the benchmark suite (skipped without torch: the ``[bench]`` extra).
+
+A training peer must give the JAX step's loss, loss terms, gradient norm and update norm on the same
+weights and batch before it is timed, and a mis-ported peer (a wrong loss weight) must be refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from benchmarks import harness
+
+QUIET = dict(log=lambda s: None)
+
+
+def test_training_peer_cases_build_without_torch_impls():
+    from benchmarks.cases import peers_train as PT
+
+    case = PT.ae_case("tiny", with_torch=False)
+    assert [i.name for i in case.impls] == ["jit"]
+
+
+torch = pytest.importorskip("torch", reason="the PyTorch peers need torch (pip install '.[bench]')")
+
+
+@pytest.mark.parametrize("stage", ["autoencoder", "transformer"])
+def test_tgst_training_peer_equals_the_jax_step(stage):
+    from benchmarks.cases import peers_train as PT
+
+    case = (PT.ae_case if stage == "autoencoder" else PT.transformer_case)("tiny", batch=2, window=128)
+    recs = harness.run_case(case, repeats=2, impls=["jit", "torch"], **QUIET)
+    jit, peer = recs
+    assert peer["max_abs_diff"] is not None and peer["reference"] == "jit"
+    assert jit["xla_flops"] > 0 and peer["flops"] == jit["flops"]
+
+
+def test_a_training_peer_with_a_wrong_loss_weight_is_refused():
+    from benchmarks.cases import peers_train as PT
+
+    t = PT.config("tiny").train.transformer
+    wrong = dataclasses.replace(t, lambda_cyclic=t.lambda_cyclic * 1.5)
+    case = PT.transformer_case("tiny", batch=2, window=128, train=wrong)
+    with pytest.raises(harness.EqualityError, match="^torch: output"):
+        harness.run_case(case, repeats=2, impls=["jit", "torch"], **QUIET)
+
+
+@pytest.mark.slow
+def test_compiled_autoencoder_training_peer_equals_the_eager_one():
+    from benchmarks.cases import peers_train as PT
+
+    case = PT.ae_case("tiny", batch=2, window=64)
+    recs = {r["impl"]: r for r in harness.run_case(case, repeats=2, impls=["jit", "torch", "torch_compile"],
+                                                   **QUIET)}
+    assert recs["torch_compile"]["reference"] == "torch"
+    assert recs["torch_compile"]["compile_s"] > 0

@@ -22,6 +22,32 @@ def test_training_peer_cases_build_without_torch_impls():
     assert [i.name for i in case.impls] == ["jit"]
 
 
+def _rec(impl, ms, compile_s=None, floor=None):
+    return {"case": "c", "impl": impl, "median_us": ms * 1e3, "compile_s": compile_s, "floor_fraction": floor}
+
+
+def test_compile_table_separates_eager_and_compiled_peers():
+    from benchmarks import report
+
+    rows = [_rec("jit", 1.0, 2.0, 0.5), _rec("torch", 4.0), _rec("torch_1t", 3.0, None, 0.1),
+            _rec("torch_compile", 2.0, 60.0, 0.25)]
+    r = report.peer_compile_ratios(rows)["c"]
+    assert (r["jit_vs_eager"], r["eager_impl"], r["jit_vs_compiled"], r["compile_s"]) == (3.0, "torch_1t", 2.0, 60.0)
+    assert report.peer_ratios(rows) == {"c": {"jit": 3.0}}  # the eager peers only
+    assert "| c | 1.00 | 3.00 | 2.00 | 3.00x | 2.00x | 2.0 | 60.0 | 50.0 % | 10.0 % | 25.0 % |" in \
+        report.peer_compile_table(rows)
+
+
+def test_an_implementation_is_checked_against_its_own_reference():
+    outs = {"jit": {"y": 1.0}, "torch": {"y": 1.5}, "torch_compile": {"y": 1.5}}
+    with pytest.raises(harness.EqualityError, match="^torch: "):
+        harness.check_equal(outs, rtol=0, atol=1e-6)
+    diffs = harness.check_equal({"jit": {"y": 1.0}, "torch": {"y": 1.0}, "torch_compile": {"y": 1.5}},
+                                rtol=0, atol=1e-6, tolerances={"torch_compile": (0, 1.0)},
+                                references={"torch_compile": "torch"})
+    assert diffs["torch_compile"] == 0.5
+
+
 torch = pytest.importorskip("torch", reason="the PyTorch peers need torch (pip install '.[bench]')")
 
 

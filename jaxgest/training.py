@@ -183,13 +183,17 @@ def train_loop(
     desc: str = "train",
     progress: bool = True,
     on_log: Optional[Callable[[int, dict], None]] = None,
+    prefetch: int = 1,
 ):
     """Run ``step_fn`` from ``state.step`` up to ``num_steps`` (resumes from a restored state).
 
     ``step_fn(state, batch, key) -> (state, metrics)`` is expected to be jit-compiled with the state
     donated and to ``fold_in(key, state.step)`` inside; ``batch_fn(i)`` returns the batch of step ``i``.
-    Metrics are fetched from the device only at log steps (no per-step host sync).
+    Metrics are fetched from the device only at log steps (no per-step host sync). ``prefetch``: batches
+    built ahead on a background thread (:class:`jaxgest.prefetch.Prefetcher`; 0 = none), the same batches.
     """
+    from jaxgest.prefetch import Prefetcher
+
     from tqdm.auto import tqdm
 
     check_intervals(log_every=log_every, ckpt_every=ckpt_every)
@@ -199,8 +203,9 @@ def train_loop(
     bar = tqdm(total=num_steps, initial=start, desc=desc, disable=not progress, dynamic_ncols=True, leave=False)
     last_log_time = time.perf_counter()
     metrics = {}
+    next_batch = Prefetcher(batch_fn, stop=num_steps, depth=prefetch).get if prefetch else batch_fn
     for i in range(start, num_steps):
-        batch = batch_fn(i)
+        batch = next_batch(i)
         state, metrics = step_fn(state, batch, key)
         step = i + 1
         at_log = step % log_every == 0 or step == num_steps

@@ -55,10 +55,11 @@ def _train_step(state, batch, key, stats, cfg: Config):
 
 def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = None, seed: int = 0,
           devices: Optional[int] = None, progress: bool = True, log_every: int = 25,
-          ckpt_every: Optional[int] = None, overrides: Optional[dict] = None) -> dict:
+          ckpt_every: Optional[int] = None, overrides: Optional[dict] = None, prefetch: int = 1) -> dict:
     """Train (or resume) ZeroEGGS on ``data_dir``; returns a summary dict (final metrics, wall time, steps/s).
 
-    ``steps``: total steps (default: the preset's ``train.steps``); ``overrides``: config fields by bare name.
+    ``steps``: total steps (default: the preset's ``train.steps``); ``overrides``: config fields by bare name;
+    ``prefetch``: batches built ahead on a background thread (0: none; the same batches either way).
     """
     parallel.maybe_initialize_distributed()
     check_steps(steps=steps)
@@ -127,7 +128,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
     state = train_loop(state, step_fn, batches, key=jax.random.key(seed + 1), num_steps=steps,
                        checkpointer=ckpt, logger=logger, log_every=log_every,
                        ckpt_every=ckpt_every if ckpt_every is not None else max(50, steps // 10), desc="zeggs",
-                       progress=progress,
+                       progress=progress, prefetch=prefetch,
                        on_log=lambda s, m: last.update(m))
     ckpt.close()
     wall = time.perf_counter() - t0

@@ -48,6 +48,23 @@ def test_an_implementation_is_checked_against_its_own_reference():
     assert diffs["torch_compile"] == 0.5
 
 
+def test_records_without_a_work_count_get_xla_flops_and_a_floor_fraction():
+    import jax.numpy as jnp
+    import numpy as np
+
+    a = jnp.asarray(np.ones((64, 64), np.float32))
+    case = harness.Case("mm", 1, 1, [harness.Impl("jit", lambda x: x @ x, kind="jit"),
+                                      harness.Impl("numpy", lambda x: np.asarray(x) @ np.asarray(x))],
+                        make_args=lambda: (a,))
+    probe = {"gemm_gflops": 10.0, "mem_gbps": 10.0}
+    recs = harness.run_case(case, repeats=2, probe=probe, **QUIET)
+    for r in recs:
+        assert r["flops"] == r["xla_flops"] == 2.0 * 64 ** 3  # XLA's count, the same for the numpy impl
+        assert r["bytes"] == 2 * 64 * 64 * 4  # argument + output
+        assert r["floor_bound"] == "compute" and 0 < r["floor_fraction"]
+        harness.validate_record(r)
+
+
 torch = pytest.importorskip("torch", reason="the PyTorch peers need torch (pip install '.[bench]')")
 
 

@@ -1,7 +1,7 @@
 """Two short ZeroEGGS trainings that must give the same loss curve, one without and one with a speed lever.
 
 ``python -m benchmarks.zeggs_train_compare --data DIR [--preset small] [--steps 60] [--log-every 10]
-[--workdir /tmp/zcmp] [--out x.json]``
+[--workdir /tmp/zcmp] [--out x.json] [--reverse]``
 
 Runs ``jaxgest.zeggs.train.train`` twice from scratch, same seed and data: ``before`` with
 ``prefetch=0`` (batches built on the loop's thread) and ``after`` with ``prefetch=1`` (built ahead on a
@@ -41,9 +41,11 @@ def main(argv=None) -> int:
     p.add_argument("--log-every", type=int, default=10)
     p.add_argument("--workdir", default="/tmp/zeggs_train_compare")
     p.add_argument("--out", default=None)
+    p.add_argument("--reverse", action="store_true", help="run `after` first (an ordering control)")
     a = p.parse_args(argv)
     res = {}
-    for name, prefetch in (("before", 0), ("after", 1)):
+    runs = (("before", 0), ("after", 1))
+    for name, prefetch in (runs[::-1] if a.reverse else runs):
         res[name] = _run(a.data, f"{a.workdir}/{name}", a.preset, a.steps, a.log_every, prefetch)
         print(name, {k: v for k, v in res[name].items() if k != "losses"}, flush=True)
     res["losses_bit_equal"] = res["before"]["losses"] == res["after"]["losses"]

@@ -85,5 +85,5 @@ def main(stages=("autoencoder", "transformer"), calls: int = 3, top: int = 15) -
 
 
 if __name__ == "__main__":
-    main(tuple(sys.argv[1:]) or ("autoencoder", "transformer"), int(os.environ.get("N", 3)),
-         int(os.environ.get("TOP", 15)))
+    main(tuple(sys.argv[1:]) or ("autoencoder", "transformer"), int(os.environ.get("N", "3")),
+         int(os.environ.get("TOP", "15")))

@@ -51,10 +51,10 @@ def main(argv=None) -> int:
     res["losses_bit_equal"] = res["before"]["losses"] == res["after"]["losses"]
     res["load_avg_1m"] = __import__("os").getloadavg()[0]
     text = json.dumps(res, indent=2)
-    if a.out:
-        from jaxgest.io import write_text_atomic
+    if a.out:  # a stamped results file (commit, version, config, command)
+        from jaxgest.provenance import write_results
 
-        write_text_atomic(a.out, text + "\n")
+        write_results(a.out, res, {"preset": a.preset, "steps": a.steps, "log_every": a.log_every, "data": a.data, "reverse": a.reverse}, ["python", "-m", __spec__.name] + list(sys.argv[1:] if argv is None else argv))
     print(text)
     return 0 if res["losses_bit_equal"] else 1
 

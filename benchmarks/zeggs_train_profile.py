@@ -208,10 +208,10 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     res = profile(a.preset, a.repeats, tuple(int(x) for x in a.unroll.split(",") if x), data_dir=a.data)
     text = json.dumps(res, indent=2)
-    if a.out:
-        from jaxgest.io import write_text_atomic
+    if a.out:  # a stamped results file (commit, version, config, command)
+        from jaxgest.provenance import write_results
 
-        write_text_atomic(a.out, text + "\n")
+        write_results(a.out, res, {"preset": a.preset, "repeats": a.repeats, "unroll": a.unroll, "data": a.data}, ["python", "-m", __spec__.name] + list(sys.argv[1:] if argv is None else argv))
     print(text)
     return 0
 

@@ -14,7 +14,8 @@ before it still runs), as without prefetching.
 from __future__ import annotations
 
 import concurrent.futures
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 
 class Prefetcher:

@@ -185,4 +185,4 @@ def step_call(peer: _StepPeer):
     return run
 
 
-__all__ = ["AutoencoderStepPeer", "TransformerStepPeer", "TGSTPeer", "step_call"]
+__all__ = ["AutoencoderStepPeer", "TGSTPeer", "TransformerStepPeer", "step_call"]

@@ -111,7 +111,7 @@ class ZeggsPeer(nn.Module):
 
     def forward(self, speech, style, pose0, root_position0, root_rotation0, facing, mean, std, in_scale,
                 frame=None):
-        """The whole clip; ``frame``: the per-frame function (default :meth:`frame`; a ``torch.compile``\ d
+        """The whole clip; ``frame``: the per-frame function (default :meth:`frame`; a compiled
         one for the compiled peer: compiling the per-frame step, not a 300-times unrolled loop)."""
         frame = frame or self.frame
         pose, pos, rot = pose0, root_position0, root_rotation0

@@ -7,6 +7,7 @@ weights and batch before it is timed, and a mis-ported peer (a wrong loss weight
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 
 import pytest
 
@@ -65,9 +66,11 @@ def test_records_without_a_work_count_get_xla_flops_and_a_floor_fraction():
         harness.validate_record(r)
 
 
-torch = pytest.importorskip("torch", reason="the PyTorch peers need torch (pip install '.[bench]')")
+needs_torch = pytest.mark.skipif(importlib.util.find_spec("torch") is None,
+                                 reason="the PyTorch peers need torch (pip install '.[bench]')")
 
 
+@needs_torch
 @pytest.mark.parametrize("stage", ["autoencoder", "transformer"])
 def test_tgst_training_peer_equals_the_jax_step(stage):
     from benchmarks.cases import peers_train as PT
@@ -79,6 +82,7 @@ def test_tgst_training_peer_equals_the_jax_step(stage):
     assert jit["xla_flops"] > 0 and peer["flops"] == jit["flops"]
 
 
+@needs_torch
 def test_a_training_peer_with_a_wrong_loss_weight_is_refused():
     from benchmarks.cases import peers_train as PT
 
@@ -89,6 +93,7 @@ def test_a_training_peer_with_a_wrong_loss_weight_is_refused():
         harness.run_case(case, repeats=2, impls=["jit", "torch"], **QUIET)
 
 
+@needs_torch
 @pytest.mark.slow
 def test_compiled_autoencoder_training_peer_equals_the_eager_one():
     from benchmarks.cases import peers_train as PT

@@ -12,7 +12,16 @@ a wrong implementation is worse than none), then times each:
   compilation per implementation). The persistent compilation cache is switched off by
   :func:`configure_jax` (``python -m benchmarks`` calls it) so ``compile_s`` is a real compile, not a disk
   read;
+* compiled non-JAX impls (``kind="compiled"``: ``torch.compile``): the first call compiles; its wall time is
+  reported as ``compile_s`` (it includes that one call's run), then steady state as for the others;
 * other impls (eager JAX under ``jax.disable_jit()``, NumPy, ...): steady state only, ``compile_s`` null.
+
+An implementation may name its own ``reference`` (e.g. ``torch.compile`` checked against the eager peer);
+otherwise it is checked against the case's first implementation.
+
+Work of a call (the floor fraction, :func:`jaxgest.bench.machine.floor`): the case's ``work`` function, or
+else XLA's cost analysis of the case's first jit implementation (``xla_flops``; the same count is used for
+every implementation of the case) with the compulsory bytes = the arguments and outputs of one call.
 
 Steady state: warm-up calls (at least one: eager JAX caches one executable per primitive on first use),
 then ``repeats`` timed repeats. Each repeat runs the call ``inner`` times, ``inner`` chosen so a repeat
@@ -77,6 +86,9 @@ EXTRA_FIELDS: dict[str, tuple] = {
     "bytes": (float, type(None)),
     "floor_bound": (str, type(None)),
     "floor_fraction": (float, type(None)),
+    "xla_flops": (float, type(None)),
+    "xla_bytes_accessed": (float, type(None)),
+    "reference": (str, type(None)),
 }
 # The JSON document written by ``--json``.
 DOCUMENT_FIELDS: dict[str, tuple] = {
@@ -108,6 +120,8 @@ class Impl:
     # reduced-precision variant checked loosely
     rtol: Optional[float] = None
     atol: Optional[float] = None
+    # the implementation whose output this one's is checked against (None: the case's first)
+    reference: Optional[str] = None
 
 
 @dataclasses.dataclass
@@ -156,21 +170,25 @@ def _to_numpy_tree(x):
     return jax.tree_util.tree_map(lambda a: np.asarray(a, dtype=np.float64), x)
 
 
-def check_equal(outputs: dict, *, rtol: float, atol: float, tolerances: Optional[dict] = None) -> dict:
-    """Compare every output pytree with the first one's; return ``{impl: max_abs_diff}``.
+def check_equal(outputs: dict, *, rtol: float, atol: float, tolerances: Optional[dict] = None,
+                references: Optional[dict] = None) -> dict:
+    """Compare every output pytree with the first one's (or ``references[name]``'s); ``{impl: max_abs_diff}``.
 
     Raises :class:`EqualityError` naming the implementation that differs (structure, shape, values) or
     the reference when its output is not finite (NaN == NaN would hide a broken case).
     """
     names = list(outputs)
-    ref_name = names[0]
+    first = names[0]
     rtol0, atol0 = rtol, atol
-    ref_leaves, ref_def = jax.tree_util.tree_flatten_with_path(_to_numpy_tree(outputs[ref_name]))
-    for path, a in ref_leaves:
+    for path, a in jax.tree_util.tree_flatten_with_path(_to_numpy_tree(outputs[first]))[0]:
         if not np.all(np.isfinite(a)):
-            raise EqualityError(f"{ref_name}: output{jax.tree_util.keystr(path)} is not finite")
-    diffs = {ref_name: 0.0}
+            raise EqualityError(f"{first}: output{jax.tree_util.keystr(path)} is not finite")
+    diffs = {first: 0.0}
     for name in names[1:]:
+        ref_name = (references or {}).get(name) or first
+        if ref_name not in outputs:
+            raise EqualityError(f"{name}: its reference {ref_name!r} was not run")
+        ref_leaves, ref_def = jax.tree_util.tree_flatten_with_path(_to_numpy_tree(outputs[ref_name]))
         rtol, atol = (tolerances or {}).get(name, (rtol0, atol0))
         leaves, tree_def = jax.tree_util.tree_flatten_with_path(_to_numpy_tree(outputs[name]))
         if tree_def != ref_def:
@@ -252,6 +270,7 @@ class Prepared:
     first_call_s: float  # seconds of the first call (slow implementations get fewer repeats)
     rss0: Optional[float]  # RSS (MB) before tracing, None where the high-water mark cannot be reset
     peak: Optional[float]  # RSS high-water mark (MB) after compiling and the first call
+    cost: Optional[dict] = None  # jit: XLA's cost analysis of the executable (flops, bytes accessed)
 
 
 def prepare(impl: Impl, args: tuple) -> tuple[Prepared, Any]:
@@ -273,10 +292,12 @@ def prepare(impl: Impl, args: tuple) -> tuple[Prepared, Any]:
         compiled = lowered.compile()
         t3 = time.perf_counter()
         timings.update(trace_s=t1 - t0, lower_s=t2 - t1, compile_s=t3 - t2)
+        cost = xla_cost(compiled)
 
         def call():
             return compiled(*args)
     else:
+        cost = None
 
         def call():
             return impl.fn(*args)
@@ -284,8 +305,31 @@ def prepare(impl: Impl, args: tuple) -> tuple[Prepared, Any]:
     t = time.perf_counter()
     out = jax.block_until_ready(call())
     first = time.perf_counter() - t
+    if impl.kind == "compiled":  # torch.compile & co: the first call traces and compiles
+        timings["compile_s"] = first
     peak = _status_mb("VmHWM") if rss0 is not None else None
-    return Prepared(call, timings, first, rss0, peak), out
+    return Prepared(call, timings, first, rss0, peak, cost), out
+
+
+def xla_cost(compiled) -> Optional[dict]:
+    """``{"flops", "bytes_accessed"}`` of a compiled JAX executable (XLA's HLO cost analysis), or None.
+
+    XLA counts a while loop's body once, whatever its trip count: a ``lax.scan`` over T steps is
+    undercounted T-fold, so cases with scans give their own ``work`` count."""
+    try:
+        c = compiled.cost_analysis()
+    except Exception:  # noqa: BLE001  (backends without cost analysis)
+        return None
+    if isinstance(c, (list, tuple)):
+        c = c[0] if c else None
+    if not c or "flops" not in c:
+        return None
+    return {"flops": float(c["flops"]), "bytes_accessed": float(c.get("bytes accessed", 0.0))}
+
+
+def tree_nbytes(tree) -> float:
+    """Bytes of the array leaves of a pytree (numpy, JAX or anything with ``nbytes``)."""
+    return float(sum(getattr(x, "nbytes", 0) for x in jax.tree_util.tree_leaves(tree)))
 
 
 def measure(impl: Impl, args: tuple, *, repeats: int, warmup: int = 2, min_repeat_s: float = 0.02,
@@ -333,15 +377,21 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
     compare = check and len(chosen) > 1
     prepared: dict = {}
     outputs: dict = {}
+    io_bytes = None
     for impl in chosen:
         prepared[impl.name], out = prepare(impl, args)
+        if io_bytes is None and impl.kind == "jit":
+            io_bytes = tree_nbytes(args) + tree_nbytes(out)
         if compare:
             outputs[impl.name] = jax.device_get(out)
         del out
     tolerances = {i.name: (case.rtol if i.rtol is None else i.rtol, case.atol if i.atol is None else i.atol)
                   for i in chosen}
-    diffs: dict = check_equal(outputs, rtol=case.rtol, atol=case.atol, tolerances=tolerances) if compare else {}
+    references = {i.name: i.reference for i in chosen if i.reference and i.reference in outputs}
+    diffs: dict = (check_equal(outputs, rtol=case.rtol, atol=case.atol, tolerances=tolerances,
+                               references=references) if compare else {})
     del outputs
+    jit_cost = next((prepared[i.name].cost for i in chosen if prepared[i.name].cost), None)
     timed = (time_interleaved({i.name: prepared.pop(i.name) for i in chosen}, repeats=repeats)
              if case.interleave and len(chosen) > 1 else {})
     records = []
@@ -355,6 +405,9 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
             "group": case.group,
             "note": case.note,
             "max_abs_diff": diffs.get(impl.name),
+            "reference": references.get(impl.name, chosen[0].name if compare and impl is not chosen[0] else None),
+            "xla_flops": jit_cost["flops"] if jit_cost else None,
+            "xla_bytes_accessed": jit_cost["bytes_accessed"] if jit_cost else None,
         }
         if timed:
             rec.update(timed[impl.name], interleaved=True)
@@ -363,8 +416,10 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
                                slow_repeats=case.max_repeats_slow, prepared=prepared.pop(impl.name)))
         rec["per_pose_us"] = rec["median_us"] / case.num_poses
         rec["per_frame_us"] = rec["median_us"] / case.frames
-        if case.work is not None:
-            flops, nbytes = case.work(impl.name)
+        work = (case.work(impl.name) if case.work is not None
+                else (jit_cost["flops"], io_bytes) if jit_cost and io_bytes is not None else None)
+        if work is not None:
+            flops, nbytes = work
             rec.update(flops=float(flops), bytes=float(nbytes))
             rec.update(floor(flops, nbytes, rec["median_us"] * 1e-6, probe))
         log(f"  {case.name:<28} {impl.name:<6} {rec['median_us'] / 1e3:10.3f} ms/call "

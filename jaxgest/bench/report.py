@@ -19,13 +19,74 @@ def ratios(records: list[dict]) -> dict:
 
 
 def _is_torch(impl: str) -> bool:
-    return impl == "torch" or impl.startswith("torch_")
+    """An eager PyTorch peer (``torch``, ``torch_1t``); compiled peers are :func:`_is_torch_compiled`."""
+    return (impl == "torch" or impl.startswith("torch_")) and not _is_torch_compiled(impl)
+
+
+def _is_torch_compiled(impl: str) -> bool:
+    return impl.startswith("torch_compile")
+
+
+def peer_compile_ratios(records: list[dict]) -> dict:
+    """``{case: {"jit_ms", "eager_ms", "compiled_ms", "jit_vs_eager", "jit_vs_compiled", "compile_s", ...}}``
+    for cases with a jit impl and PyTorch peers: best eager (any thread setting) and best compiled median;
+    ratios > 1 mean jit is faster. ``*_floor``: the fraction of the machine's floor each reached."""
+    by_case: dict = defaultdict(dict)
+    for r in records:
+        by_case[r["case"]][r["impl"]] = r
+    out = {}
+    for case, impls in by_case.items():
+        if "jit" not in impls:
+            continue
+        eager = [r for k, r in impls.items() if _is_torch(k)]
+        comp = [r for k, r in impls.items() if _is_torch_compiled(k)]
+        if not eager and not comp:
+            continue
+        jit = impls["jit"]
+        row = {"jit_ms": jit["median_us"] / 1e3, "jit_compile_s": jit.get("compile_s"),
+               "jit_floor": jit.get("floor_fraction")}
+        for label, group in (("eager", eager), ("compiled", comp)):
+            if group:
+                best = min(group, key=lambda r: r["median_us"])
+                row.update({f"{label}_ms": best["median_us"] / 1e3, f"{label}_impl": best["impl"],
+                            f"jit_vs_{label}": best["median_us"] / jit["median_us"],
+                            f"{label}_floor": best.get("floor_fraction")})
+                if label == "compiled":
+                    row["compile_s"] = best.get("compile_s")
+        out[case] = row
+    return out
+
+
+def peer_compile_table(records: list[dict]) -> str:
+    """jit vs the best eager and the best ``torch.compile`` peer per case: ms per call, speed-ups, compile
+    seconds, fraction of the machine's floor."""
+    rat = peer_compile_ratios(records)
+    if not rat:
+        return ""
+
+    def f(x, fmt):
+        return "" if x is None else format(x, fmt)
+
+    def pct(x):
+        return "" if x is None else f"{100 * x:.1f} %"
+
+    lines = ["| case | jit ms | eager ms | compiled ms | jit vs eager | jit vs compiled | jit compile s | "
+             "torch.compile s | jit of floor | eager of floor | compiled of floor |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for case, r in rat.items():
+        lines.append(f"| {case} | {r['jit_ms']:.2f} | {f(r.get('eager_ms'), '.2f')} | {f(r.get('compiled_ms'), '.2f')} | "
+                     f"{f(r.get('jit_vs_eager'), '.2f')}{'x' if 'jit_vs_eager' in r else ''} | "
+                     f"{f(r.get('jit_vs_compiled'), '.2f')}{'x' if 'jit_vs_compiled' in r else ''} | "
+                     f"{f(r.get('jit_compile_s'), '.1f')} | {f(r.get('compile_s'), '.1f')} | {pct(r.get('jit_floor'))} | "
+                     f"{pct(r.get('eager_floor'))} | {pct(r.get('compiled_floor'))} |")
+    return "\n".join(lines)
 
 
 def peer_ratios(records: list[dict]) -> dict:
     """``{case: {impl: best torch median / impl median}}`` for cases with PyTorch peers (> 1: faster).
 
-    "best torch" is the fastest of the case's ``torch*`` implementations (thread settings) in this run.
+    "best torch" is the fastest of the case's eager ``torch*`` implementations (thread settings) in this
+    run (``torch.compile`` peers: :func:`peer_compile_ratios`).
     """
     by_case: dict = defaultdict(dict)
     for r in records:
@@ -35,7 +96,7 @@ def peer_ratios(records: list[dict]) -> dict:
         peers = [v for k, v in impls.items() if _is_torch(k)]
         if peers and len(peers) < len(impls):
             best = min(peers)
-            out[case] = {k: best / v for k, v in impls.items() if not _is_torch(k)}
+            out[case] = {k: best / v for k, v in impls.items() if not _is_torch(k) and not _is_torch_compiled(k)}
     return out
 
 
@@ -51,7 +112,7 @@ def peer_table(records: list[dict]) -> str:
         if _is_torch(r["impl"]):
             torch_ms[r["case"]] = min(torch_ms.get(r["case"], float("inf")), r["median_us"] / 1e3)
     for r in records:
-        if r["case"] in rat and not _is_torch(r["impl"]):
+        if r["case"] in rat and not _is_torch(r["impl"]) and not _is_torch_compiled(r["impl"]):
             frac = r.get("floor_fraction")
             lines.append(f"| {r['case']} | {r['batch']} | {r['frames']} | {r['impl']} | {r['median_us'] / 1e3:.2f} | "
                          f"{torch_ms[r['case']]:.2f} | {rat[r['case']][r['impl']]:.2f}x | "

@@ -88,11 +88,13 @@ def run(args) -> tuple[dict, int]:
     info["load_avg_1m_end"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     doc = {"machine": info, "quick": bool(args.quick), "wall_s": time.perf_counter() - t0,
            "ratios": report.ratios(records), "peer_ratios": report.peer_ratios(records),
+           "peer_compile_ratios": report.peer_compile_ratios(records),
            "failures": failures, "records": records, **extras}
     harness.validate_document(doc)
     print()
     print(report.markdown_table(records))
-    for extra in (report.ratio_table(records), report.peer_table(records), report.floor_table(records),
+    for extra in (report.ratio_table(records), report.peer_table(records), report.peer_compile_table(records),
+                  report.floor_table(records),
                   report.compile_table(records)):
         if extra:
             print()

@@ -23,9 +23,10 @@ skipped with a note; any other import error is a bug and propagates.
 
 The model cases live in ``tgst`` (transfer, clip-length scaling, stages), ``zeggs`` (generation per frame,
 style encoder, speech encoder and features), ``training`` (one optimiser step per model),
-``zeggs_variants`` (benchmark-local generator optimisation experiments, full run only) and ``peers``
-(side by side with eager PyTorch ports of the authors' networks, interleaved rounds; weight formats of
-the ZeroEGGS generator).
+``zeggs_variants`` (benchmark-local generator optimisation experiments, full run only), ``peers``
+(side by side with eager and compiled (``torch.compile``) PyTorch ports of the authors' networks, interleaved
+rounds; weight formats of the ZeroEGGS generator) and ``peers_train`` (TGST training steps side by side
+with eager and compiled PyTorch training steps). ``jaxgest bench --cases peer_`` runs both peer modules.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """Side by side with eager PyTorch (``pip install ".[bench]"``): TGST transfer and ZeroEGGS generation.
 
 Every case here is timed in interleaved rounds (``jit``, ``torch``, ``jit``, ``torch``, ...; median of the
-rounds) after the equality check, with ``torch.set_num_threads(cores)`` and XLA's CPU client on the same
+rounds) after the equality check (``torch_compile``: :mod:`jaxgest.bench.torch_peers.compiled`, its compile
+time reported as ``compile_s``, checked against the eager peer ``torch``), with ``torch.set_num_threads(cores)`` and XLA's CPU client on the same
 cores (its intra-op pool uses every core of the process). Without torch the cases run without their
 ``torch`` implementation (``python -m benchmarks`` says so in one line).
 
@@ -60,6 +61,36 @@ def torch_threads() -> list:
     timed and the speed-up is stated against the faster of the two (never against a slowed-down peer)."""
     n = threads()
     return [("torch", n)] + ([("torch_1t", 1)] if n > 1 else [])
+
+
+def compile_modes() -> list:
+    """The ``torch.compile`` modes timed: ``default``, plus ``max-autotune-no-cudagraphs`` when
+    ``JAXGEST_BENCH_MAX_AUTOTUNE=1`` (it autotunes GEMM templates at compile time: minutes per case on a
+    2-core CPU)."""
+    return ["default"] + (["max-autotune-no-cudagraphs"] if os.environ.get("JAXGEST_BENCH_MAX_AUTOTUNE") == "1"
+                          else [])
+
+
+def compiled_impls(build) -> list:
+    """``torch_compile`` (and ``torch_compile_max``) impls: ``build(mode)`` -> the compiled peer's call, built
+    at the first call with every core's threads (Inductor compiles the thread count into its kernels, so
+    one thread setting per compiled peer); the first call (trace + compile + one run) is ``compile_s``;
+    checked against the eager peer (``torch``)."""
+    out = []
+    for mode in compile_modes():
+        holder = {}
+
+        def fn(*args, _mode=mode, _holder=holder):
+            from jaxgest.bench import torch_peers as P
+
+            P.set_threads(threads())
+            if "f" not in _holder:
+                _holder["f"] = build(_mode)
+            return _holder["f"](*args)
+
+        name = "torch_compile" if mode == "default" else "torch_compile_max"
+        out.append(Impl(name, fn, kind="compiled", reference="torch"))
+    return out
 
 
 def authors_config():
@@ -136,6 +167,7 @@ def tgst_case(batch: int, frames: int = 1280, *, with_torch: bool = True, repeat
             return torch_fn
 
         impls += [Impl(name, make(n)) for name, n in torch_threads()]
+        impls += compiled_impls(lambda mode: P.compiled.tgst_compiled_call(P.load_tgst(cfg, tgst_params()), mode))
     nbytes = 4.0 * batch * (frames * (cfg.autoencoder.upper_channels * 2 + cfg.autoencoder.lower_channels)
                             + STYLE_FRAMES * cfg.autoencoder.upper_channels)
     flops = tgst_flops(cfg, batch, frames, STYLE_FRAMES)
@@ -204,6 +236,8 @@ def zeggs_case(batch: int, frames: int, *, with_torch: bool = True, formats=("bf
             return torch_fn
 
         impls += [Impl(name, make(n)) for name, n in torch_threads()]
+        impls += compiled_impls(lambda mode: P.compiled.zeggs_compiled_call(P.load_zeggs(cfg, Z._params()), scale,
+                                                                            mode))
     per_weight = {"bf16": 2.0, "int8": 1.125}  # int8: one float32 scale per 32 weights
 
     def work(impl):

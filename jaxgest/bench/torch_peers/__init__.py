@@ -12,8 +12,9 @@ caller (:func:`set_threads`).
 
 from __future__ import annotations
 
+from jaxgest.bench.torch_peers import compiled  # noqa: F401  (torch.compile variants)
 from jaxgest.bench.torch_peers.common import set_threads
 from jaxgest.bench.torch_peers.tgst import TGSTPeer, load_tgst, tgst_call
 from jaxgest.bench.torch_peers.zeggs import ZeggsPeer, load_zeggs, zeggs_call
 
-__all__ = ["TGSTPeer", "ZeggsPeer", "load_tgst", "load_zeggs", "set_threads", "tgst_call", "zeggs_call"]
+__all__ = ["compiled", "TGSTPeer", "ZeggsPeer", "load_tgst", "load_zeggs", "set_threads", "tgst_call", "zeggs_call"]

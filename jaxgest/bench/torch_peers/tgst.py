@@ -98,7 +98,9 @@ class TransformerEncoder(nn.Module):
         self.mlp = nn.Sequential(nn.Linear(hid_dim, hid_dim), nn.GELU(), nn.Linear(hid_dim, hid_dim))
         self.cls_token = nn.Parameter(torch.randn(1, hid_dim))
 
-    def forward(self, z):
+    def forward(self, z, return_aux: bool = False):
+        """``return_aux``: also ``{"keys": (batch, N, d), "cls": (batch, d)}`` (the structure and appearance
+        losses' inputs; CLS excluded from the keys)."""
         _z = z.transpose(0, 1)
         _cls_tokens = self.cls_token.repeat(_z.shape[0], 1, 1)
         _z = torch.cat((_cls_tokens, _z), dim=1)
@@ -110,7 +112,8 @@ class TransformerEncoder(nn.Module):
         attn = torch.softmax(attn, dim=-1)
         _sa = self.fc_o(torch.matmul(attn, value))
         _zsa = self.layer_nrm(_z + _sa)
-        return (_zsa + self.mlp(_zsa)).transpose(0, 1)
+        out = (_zsa + self.mlp(_zsa)).transpose(0, 1)
+        return (out, {"keys": key[:, 1:], "cls": out[0]}) if return_aux else out
 
 
 class TransformerDecoder(nn.Module):

@@ -97,8 +97,23 @@ class ZeggsPeer(nn.Module):
         self.vel = torch.as_tensor(np.arange(cfg.pose_dim)[lay.root_velocity])
         self.ang = torch.as_tensor(np.arange(cfg.pose_dim)[lay.root_angular_velocity])
 
-    def forward(self, speech, style, pose0, root_position0, root_rotation0, facing, mean, std, in_scale):
+    def frame(self, pose, pos, rot, state, speech, style, facing, in_scale, vel_m, vel_s, ang_m, ang_s):
+        """One generated frame (the body of ``Decoder.forward``'s loop): -> (pose, pos, rot, state)."""
         dt = 1.0 / self.cfg.fps
+        x = torch.cat([pose * in_scale, quat_rotate(quat_inv(rot), facing)], dim=-1)
+        pose, state = self.recurrent_decoder(x, speech, style, state)
+        vel = pose[:, self.vel] * vel_s + vel_m
+        ang = pose[:, self.ang] * ang_s + ang_m
+        rot = quat_mul(expmap_to_quat(quat_rotate(rot, ang) * dt), rot)
+        rot = rot / torch.clamp(torch.linalg.norm(rot, dim=-1, keepdim=True), min=1e-12)
+        pos = pos + quat_rotate(rot, vel) * dt
+        return pose, pos, rot, state
+
+    def forward(self, speech, style, pose0, root_position0, root_rotation0, facing, mean, std, in_scale,
+                frame=None):
+        """The whole clip; ``frame``: the per-frame function (default :meth:`frame`; a compiled
+        one for the compiled peer: compiling the per-frame step, not a 300-times unrolled loop)."""
+        frame = frame or self.frame
         pose, pos, rot = pose0, root_position0, root_rotation0
         state = self.cell_state_encoder(torch.cat([pose * in_scale, quat_rotate(quat_inv(rot), facing)], -1),
                                         style)
@@ -106,13 +121,8 @@ class ZeggsPeer(nn.Module):
         vel_m, vel_s = mean[self.vel], std[self.vel]
         ang_m, ang_s = mean[self.ang], std[self.ang]
         for i in range(1, speech.shape[1]):
-            x = torch.cat([pose * in_scale, quat_rotate(quat_inv(rot), facing)], dim=-1)
-            pose, state = self.recurrent_decoder(x, speech[:, i], style, state)
-            vel = pose[:, self.vel] * vel_s + vel_m
-            ang = pose[:, self.ang] * ang_s + ang_m
-            rot = quat_mul(expmap_to_quat(quat_rotate(rot, ang) * dt), rot)
-            rot = rot / torch.clamp(torch.linalg.norm(rot, dim=-1, keepdim=True), min=1e-12)
-            pos = pos + quat_rotate(rot, vel) * dt
+            pose, pos, rot, state = frame(pose, pos, rot, state, speech[:, i], style, facing, in_scale,
+                                          vel_m, vel_s, ang_m, ang_s)
             poses.append(pose)
             positions.append(pos)
             rotations.append(rot)
@@ -144,10 +154,11 @@ def load_zeggs(cfg, params) -> ZeggsPeer:
     return peer
 
 
-def zeggs_call(peer: ZeggsPeer, in_scale: np.ndarray):
+def zeggs_call(peer: ZeggsPeer, in_scale: np.ndarray, frame=None):
     """``f(params, speech, style, pose0, root_position0, root_rotation0, facing) -> dict`` (NumPy out).
 
-    Identity normalisation (mean 0, std 1), as the benchmark's JAX generator call."""
+    Identity normalisation (mean 0, std 1), as the benchmark's JAX generator call. ``frame``: the per-frame
+    function (:meth:`ZeggsPeer.frame` or a compiled one)."""
     P = peer.cfg.pose_dim
     mean, std = torch.zeros(P), torch.ones(P)
     scale = tensor(in_scale)
@@ -156,7 +167,7 @@ def zeggs_call(peer: ZeggsPeer, in_scale: np.ndarray):
         args = [torch.from_numpy(np.array(a, np.float32)) for a in
                 (speech, style, pose0, root_position0, root_rotation0, facing)]
         with torch.inference_mode():
-            y, p, q = peer(*args, mean, std, scale)
+            y, p, q = peer(*args, mean, std, scale, frame=frame)
         return {"pose": y.numpy(), "root_position": p.numpy(), "root_rotation": q.numpy()}
 
     return run

@@ -79,8 +79,7 @@ def holds(res, sign):
     m, se, _, per, _ = res
     ok = sign * m > 2 * se and all(sign * x > 0 for x in per)
     if len(per) < 3:
-        side = "expected sign beyond 2 SE" if sign * m > 2 * se else "not beyond 2 SE in the expected sign"
-        return f"({side}; {len(per)} seed(s): cannot hold)"
+        return f"({'> 2 SE' if sign * m > 2 * se else '< 2 SE'}; {len(per)} seed)"
     return "**holds**" if ok else "does not hold"
 
 
@@ -88,7 +87,7 @@ def fmt_rel(res):
     if res is None:
         return "-"
     m, se, n, per, _ = res
-    return f"{m:+.3f} +- {se:.3f} (n {n}; seeds {', '.join(f'{x:+.3f}' for x in per)})"
+    return f"{m:+.3f} +- {se:.3f} (n {n}; {'/'.join(f'{x:+.2f}' for x in per)})"
 
 
 def mean_row(controls, runs, cond, row, err, contents=None):
@@ -215,21 +214,21 @@ def main_tables(controls, runs):
 
 
 def relations(controls, runs, contents=None):
-    out = ["| condition | soft gt_content - style as is (< 0) | soft gt_style - content as is (< 0) | "
-           "share of gap, style vs gt | share of gap, content vs gt |", "|---|---|---|---|---|"]
+    out = ["| condition | soft - style as is, gt_content (< 0; seeds) | soft - content as is, gt_style (< 0) | "
+           "gap share, style | gap share, content |", "|---|---|---|---|---|"]
     for cond in CONDS:
         r1 = paired(controls, runs, cond, "style_as_is", "soft|mirror", "gt_content", contents)
         r2 = paired(controls, runs, cond, "content_as_is", "soft|mirror", "gt_style", contents)
         s1 = share(controls, runs, cond, "content_as_is", "gt_style", contents)
         # intra: "style as is" is itself a ground-truth take (the floor), so the content gap is empty
         s2 = share(controls, runs, cond, "style_as_is", "gt_content", contents) if cond != "intra" else None
-        f = lambda s: "-" if s is None else f"{s[0]:.0%} +- {s[1]:.0%} (n {s[2]})"
+        f = lambda s: "-" if s is None else f"{s[0]:.0%} +- {s[1]:.0%}"
         out.append(f"| {cond} | {fmt_rel(r1)} {holds(r1, -1)} | {fmt_rel(r2)} {holds(r2, -1)} | {f(s1)} | {f(s2)} |")
     return "\n".join(out)
 
 
 def ordering(controls, runs):
-    out = ["| condition | order on gt_style (mirror input; mean over seeds) | soft - best other (gt_style) | "
+    out = ["| condition | order on gt_style (mirror input) | soft - next best, gt_style | "
            "order on style vs exemplar |", "|---|---|---|---|"]
     for cond in CONDS:
         g = {m: mean_row(controls, runs, cond, f"{m}|mirror", "gt_style")[0] for m in METHODS}
@@ -239,9 +238,10 @@ def ordering(controls, runs):
         order = sorted(g, key=g.get)
         best = next(m for m in order if m != "soft")
         r = paired(controls, runs, cond, f"{best}|mirror", "soft|mirror", "gt_style")
-        out.append(f"| {cond} | " + " < ".join(f"{NAMES[m]} {g[m]:.3f}" for m in order) +
-                   f" | vs {NAMES[best]}: {fmt_rel(r)}, soft lower: {holds(r, -1)} | "
-                   + " < ".join(f"{NAMES[m]} {e[m]:.3f}" for m in sorted(e, key=e.get)) + " |")
+        short = {"soft": "soft", "hard": "hard", "adain": "AdaIN", "avatarnet": "Avatar"}
+        out.append(f"| {cond} | " + " < ".join(f"{short.get(m, m)} {g[m]:.2f}" for m in order) +
+                   f" | {fmt_rel(r)} {holds(r, -1)} | "
+                   + " < ".join(f"{short.get(m, m)} {e[m]:.2f}" for m in sorted(e, key=e.get)) + " |")
     return "\n".join(out)
 
 
@@ -258,6 +258,20 @@ def round_trip(runs, spread):
     return "\n".join(out)
 
 
+def compact_table(controls, runs):
+    """gt_content / gt_style of the headline rows in the three conditions (the full rows: TABLES.md)."""
+    rows = [(f"{NAMES[m]}, exemplar + mirror", f"{m}|mirror", runs) for m in METHODS]
+    rows += [("soft swap, exemplar as is (seed 0)", "soft|as_is", runs[:1]), ("AE round trip", "autoencoder", runs),
+             ("content as is", "content_as_is", []), ("style as is", "style_as_is", []),
+             ("a ground-truth take (floor)", "gt_take", []), ("collage bound, + mirrored frames", "collage|mirror", [])]
+    out = ["| row (gt_content m / gt_style m/s) | " + " | ".join(CONDS) + " |", "|---" + "|---:" * len(CONDS) + "|"]
+    for label, row, rr in rows:
+        out.append(f"| {label} | " + " | ".join(
+            f"{cell(mean_row(controls, rr, c, row, 'gt_content')).split(' ')[0]} / "
+            f"{cell(mean_row(controls, rr, c, row, 'gt_style')).split(' ')[0]}" for c in CONDS) + " |")
+    return "\n".join(out)
+
+
 def build():
     t1 = load("table1.json")
     parts = []
@@ -270,7 +284,8 @@ def build():
     controls = dict(full).get("full_s0")
     if controls:
         runs = [(n, r) for n, r in full]
-        parts += ["", f"### Tables 2-3 on the test takes ({len(runs)} seed(s) of the full runs)", main_tables(controls, runs)]
+        parts += ["", f"### Tables 2-3 on the test takes, against the ground truth ({len(runs)} seed(s); every row and "
+                  "column with its spread over seeds: [TABLES.md](TABLES.md))", "", compact_table(controls, runs)]
         parts += ["", "### Relations (exemplar + mirror input; soft swap)", "", relations(controls, runs)]
         parts += ["", "### The four methods on style vs ground truth", "", ordering(controls, runs)]
         if zero:
@@ -294,6 +309,10 @@ def main():
     ap.add_argument("--print", action="store_true")
     a = ap.parse_args()
     text = build()
+    full = [(f"full_s{s}", r) for s, r in seeds_of("full")]
+    if full:
+        (HERE / "TABLES.md").write_text("# TGST on Bandai-Namco-2: Tables 2-3 in full (generated by tables.py)\n"
+                                        + main_tables(full[0][1], full) + "\n")
     if a.print:
         print(text)
         return 0

@@ -26,11 +26,12 @@ def load(run):
 
 
 def ci(s) -> str:
-    return f"{s['mean']:.3f} [{s['low']:.3f}, {s['high']:.3f}]"
+    """Mean and the interval's half-width (the interval is symmetric: mean +- 1.96 SE)."""
+    return f"{s['mean']:.3f} ± {(s['high'] - s['low']) / 2:.3f}"
 
 
 def yes(ok) -> str:
-    return "holds" if ok else "does not hold"
+    return "holds" if ok else "no"
 
 
 def claims_table(runs, title) -> list:

@@ -25,7 +25,7 @@ from jaxgest.bench.cases import tgst as T
 from jaxgest.tgst import model as M
 
 
-def _hlo_tables(hlo: str) -> tuple[dict, dict]:
+def hlo_tables(hlo: str) -> tuple[dict, dict]:
     """(op name -> source op_name, op name -> "shape opcode") of the entry computation."""
     meta, shape = {}, {}
     for line in hlo[hlo.index("ENTRY"):].splitlines():
@@ -38,19 +38,16 @@ def _hlo_tables(hlo: str) -> tuple[dict, dict]:
     return meta, shape
 
 
-def main(batch: int = 8, calls: int = 10, top: int = 25) -> dict:
-    cfg, params = peers.TCFG, peers.tgst_params()
-    content, style = T._clips(batch, 1280)
-    f = jax.jit(lambda p, c, s: M.transfer_arrays(p, c, s, cfg=cfg)[:2])
-    compiled = f.lower(params, content, style).compile()
-    meta, shape = _hlo_tables(compiled.as_text())
-    for _ in range(3):
-        jax.block_until_ready(compiled(params, content, style))
+def op_times(compiled, args, *, calls: int, warmup: int = 2):
+    """Mean time per call of every operation of ``compiled(*args)`` (ns, from one ``jax.profiler`` trace of
+    ``calls`` calls after ``warmup`` untimed ones) and the load average before the trace."""
+    for _ in range(warmup):
+        jax.block_until_ready(compiled(*args))
     load0 = os.getloadavg()
     with tempfile.TemporaryDirectory() as d:
         with jax.profiler.trace(d):
             for _ in range(calls):
-                jax.block_until_ready(compiled(params, content, style))
+                jax.block_until_ready(compiled(*args))
         pd = _profile_data.ProfileData.from_file(glob.glob(f"{d}/**/*.xplane.pb", recursive=True)[0])
     per_op = collections.Counter()
     for plane in pd.planes:
@@ -60,6 +57,16 @@ def main(batch: int = 8, calls: int = 10, top: int = 25) -> dict:
             for ev in line.events:
                 if not ev.name.startswith(("ThunkExecutor", "end: ")):
                     per_op[ev.name] += ev.duration_ns / calls
+    return per_op, load0
+
+
+def main(batch: int = 8, calls: int = 10, top: int = 25) -> dict:
+    cfg, params = peers.TCFG, peers.tgst_params()
+    content, style = T._clips(batch, 1280)
+    f = jax.jit(lambda p, c, s: M.transfer_arrays(p, c, s, cfg=cfg)[:2])
+    compiled = f.lower(params, content, style).compile()
+    meta, shape = hlo_tables(compiled.as_text())
+    per_op, load0 = op_times(compiled, (params, content, style), calls=calls, warmup=3)
 
     def part(name):
         m = meta.get(name, name)

@@ -1,6 +1,6 @@
 """Per-operation profile of the jitted TGST training steps (the ``peer_train_*`` cases' JAX side), no torch.
 
-``python -m benchmarks.train_op_profile [autoencoder|transformer ...]`` (env ``N`` profiled calls, default 3;
+``python -m jaxgest.bench.train_op_profile [autoencoder|transformer ...]`` (env ``N`` profiled calls, default 3;
 ``TOP`` ops listed, default 15): the ``paper`` preset's steps at their batch shapes (autoencoder 32 x 256
 frames; transformer 8 pairs of 1280 frames, authors' variant), random weights, under
 ``jax.profiler.trace`` (the method of :mod:`jaxgest.bench.tgst_profile`: each XLA operation's event time
@@ -12,35 +12,16 @@ the time per kind of operation (conv or dot / YNNPACK fusion / elementwise or co
 from __future__ import annotations
 
 import collections
-import glob
 import os
 import sys
-import tempfile
 
-import jax
-from jax._src.lib import _profile_data
 
-from jaxgest.bench.tgst_profile import _hlo_tables
+from jaxgest.bench.tgst_profile import hlo_tables, op_times
 
 
 def profile_compiled(compiled, args, *, calls: int = 3, top: int = 15, title: str = "") -> dict:
-    meta, shape = _hlo_tables(compiled.as_text())
-    for _ in range(2):
-        jax.block_until_ready(compiled(*args))
-    load0 = os.getloadavg()
-    with tempfile.TemporaryDirectory() as d:
-        with jax.profiler.trace(d):
-            for _ in range(calls):
-                jax.block_until_ready(compiled(*args))
-        pd = _profile_data.ProfileData.from_file(glob.glob(f"{d}/**/*.xplane.pb", recursive=True)[0])
-    per_op = collections.Counter()
-    for plane in pd.planes:
-        for line in plane.lines:
-            if line.name == "python":
-                continue
-            for ev in line.events:
-                if not ev.name.startswith(("ThunkExecutor", "end: ")):
-                    per_op[ev.name] += ev.duration_ns / calls
+    meta, shape = hlo_tables(compiled.as_text())
+    per_op, load0 = op_times(compiled, args, calls=calls)
 
     def kind(name):
         m, sh = meta.get(name, ""), shape.get(name, "")

@@ -1,6 +1,6 @@
 """Where a ZeroEGGS training step spends its time (``small`` preset by default), piece by piece.
 
-``python -m benchmarks.zeggs_train_profile [--preset small] [--repeats 5] [--unroll 1,2,4,8] [--out x.json]``
+``python -m jaxgest.bench.zeggs_train_profile [--preset small] [--repeats 5] [--unroll 1,2,4,8] [--out x.json]``
 
 Times, on one random batch of the preset's shape (:func:`jaxgest.bench.cases.training.zeggs_batch`), each
 jit-compiled apart (median of ``repeats`` calls, after a warm-up; compile seconds apart):
@@ -198,7 +198,7 @@ def profile(preset: str = "small", repeats: int = 5, unrolls=(1, 2, 4, 8), loss_
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.zeggs_train_profile", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m jaxgest.bench.zeggs_train_profile", description=__doc__.split("\n")[0])
     p.add_argument("--preset", default="small")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--unroll", default="1,2,4,8", help="comma-separated scan unroll factors (1 = as shipped)")

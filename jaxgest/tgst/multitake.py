@@ -1,4 +1,4 @@
-"""Multi-take TGST evaluation (Bandai-Namco-2; SPEC §5 "Multi-take data"): splits by take, the pairs of the
+"""Multi-take TGST evaluation (Bandai-Namco-2; docs/design.md §5 "Multi-take data"): splits by take, the pairs of the
 three conditions with their ground-truth takes, and the per-pair errors and controls.
 
 * :func:`take_of` / :func:`split_by_take` / :func:`link_split` -- the take number of a Bandai-Namco clip
@@ -106,7 +106,7 @@ class TakePair:
 
 def make_multitake_pairs(clips: Sequence, takes: Sequence[int] = SPLITS["test"], *, neutral: str = NEUTRAL,
                          exemplar_takes: int | None = None, contents: Sequence[str] | None = None) -> list:
-    """The :class:`TakePair` s of the test takes of a multi-take dataset (SPEC §5, "Multi-take data").
+    """The :class:`TakePair` s of the test takes of a multi-take dataset (docs/design.md §5, "Multi-take data").
 
     Content = a clip of style ``neutral`` whose take is in ``takes`` (and whose label is in ``contents``
     when given); for every other style s and every clip e of style s among ``takes``, the pair
@@ -114,7 +114,7 @@ def make_multitake_pairs(clips: Sequence, takes: Sequence[int] = SPLITS["test"],
     (content label, s) among ``takes`` other than e. ``exemplar_takes`` (None = all): per (content clip,
     style, exemplar label) keep that many exemplar takes, rotating with the content clip's take number so
     every take is used (and a ``contents`` subset keeps the pairs of the whole set). Pairs without a ground-truth take are dropped. Ordered by (content, exemplar) path.
-    References: Kuriyama et al. 2022, §4.3 (intra / inter-scenario); SPEC §5.
+    References: Kuriyama et al. 2022, §4.3 (intra / inter-scenario); docs/design.md §5.
     """
     test = sorted(split_by_take(clips, takes), key=lambda c: str(c.path))
     cells: dict = {}
@@ -156,7 +156,7 @@ def multitake_protocol(trim_seconds: float = 0.3):
 
 
 def window_frames(fps: float, theta_at_60: int = 64) -> int:
-    """Style window at ``fps``: 64 frames at 60 fps (32 at 30 fps, ~1.07 s). The 128-frame window of SPEC §5
+    """Style window at ``fps``: 64 frames at 60 fps (32 at 30 fps, ~1.07 s). The 128-frame window of docs/design.md §5
     (2.1 s) is longer than every normal / active / feminine / youthful raise-up clip after the cut."""
     from jaxgest import metrics
 
@@ -187,7 +187,7 @@ def errors_against(result, content, exemplar_ref, gts, *, window: int, common: b
     ground-truth takes (``gts``: ``[(plain, reference)]`` features): ``{"content", "style", "gt_content",
     "gt_style"}`` (floats; the eq. 13 / 15 means; ground-truth errors averaged over the takes; None
     without a take). Result and content (or ground truth) are cut to a common length (``common``).
-    References: Kuriyama et al. 2022, eqs. 13-16; SPEC §5 (ground truth = every other take, averaged).
+    References: Kuriyama et al. 2022, eqs. 13-16; docs/design.md §5 (ground truth = every other take, averaged).
     """
     import numpy as np
 
@@ -308,7 +308,7 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
     window :func:`window_frames`. ``variants`` restricts the input variants; ``controls=False`` leaves out
     the rows that do not depend on the model (content / style as is, gt_take, collage). A pair whose content
     or exemplar is too short is skipped with the reason.
-    References: Kuriyama et al. 2022, §4.2-4.3, eqs. 13-16; SPEC §5.
+    References: Kuriyama et al. 2022, §4.2-4.3, eqs. 13-16; docs/design.md §5.
     """
     import numpy as np
     from tqdm import tqdm
@@ -426,7 +426,7 @@ def round_trip_speeds(model, clips: Sequence, protocol=None) -> list:
 
 def cross_validity(clips: Sequence, takes: Sequence[int] = SPLITS["test"], protocol=None,
                    progress: bool = False) -> list:
-    """Table 1 in the cross form (SPEC §5): for every reference g (a take of content X in style s) and every
+    """Table 1 in the cross form (docs/design.md §5): for every reference g (a take of content X in style s) and every
     other style s' and other content Y, the *content sample* (X in s', same take number) and the *style
     sample* (Y in s, same take number), each scored as if it were a transfer against g (content error vs g;
     style error vs g + its mirror; cut to a common length with g). A valid content metric scores the content

@@ -1,5 +1,5 @@
 """ZeroEGGS's own claims, measured on the **generated** motion against real motion of the same speech (GT) and
-mismatched real motion (MM) (SPEC §5, last bullet; docs/design.md §5).
+mismatched real motion (MM) (docs/design.md §5, last bullet; docs/design.md §5).
 
 The paper judges its generator by three user studies -- naturalness, appropriateness to the speech and style
 portrayal, each against GT and MM -- and by zero-shot styles (a style never seen in training reproduced from
@@ -43,7 +43,7 @@ evaluation itself.
 
 References: Ghorbani et al. 2023, §5.1 (zero-shot style), §5.3 (user studies: naturalness, appropriateness,
 style portrayal against GT and MM); Li et al. 2021 (BeatAlign); Heusel et al. 2017 (Fréchet distance);
-SPEC §5.
+docs/design.md §5.
 """
 
 from __future__ import annotations

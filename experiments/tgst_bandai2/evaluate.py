@@ -1,6 +1,6 @@
 """Evaluate one trained run of this experiment on the test takes (006-008) and write a stamped results file.
 
-    python experiments/tgst_bandai2/evaluate.py experiments/tgst_bandai2/configs/full_s0.json [--data DIR]
+    python experiments/tgst_bandai2/evaluate.py experiments/tgst_bandai2/configs/full_s0.toml [--data DIR]
     python experiments/tgst_bandai2/evaluate.py --table1 [--data DIR]     # data only: Table 1, cross form
 
 Model runs: pairs of :func:`jaxgest.tgst.multitake.make_multitake_pairs` (one exemplar take per content
@@ -13,7 +13,7 @@ pre-registered headline input (exemplar + mirror), the round trip and PCA-16
 take-to-take spread of arm speed -> ``results/table1.json``. Numbers are rounded to 5 significant digits.
 """
 import argparse
-import json
+import tomllib
 import pathlib
 import sys
 import time
@@ -63,7 +63,7 @@ def main() -> int:
             return 0
         from jaxgest.tgst.api import load_model
 
-        cfg = json.loads(pathlib.Path(a.config).read_text())
+        cfg = tomllib.loads(pathlib.Path(a.config).read_text())
         model = load_model(HERE / "out" / "runs" / cfg["name"])
         held = cfg["hold_out_content"]
         pairs = mt.make_multitake_pairs(clips, exemplar_takes=EXEMPLAR_TAKES, contents=[held] if held else None)

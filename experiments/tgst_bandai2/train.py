@@ -1,6 +1,6 @@
-"""Train one run of this experiment from its config file (``configs/NAME.json``) into ``out/runs/NAME``.
+"""Train one run of this experiment from its config file (``configs/NAME.toml``) into ``out/runs/NAME``.
 
-    python experiments/tgst_bandai2/train.py experiments/tgst_bandai2/configs/full_s0.json [--data DIR]
+    python experiments/tgst_bandai2/train.py experiments/tgst_bandai2/configs/full_s0.toml [--data DIR]
 
 The training folder ``out/splits/NAME`` holds symlinks to the Bandai-Namco-2 clips of the config's
 ``train_takes`` (001-004), without ``hold_out_content`` (zero-shot runs), plus every clip of the folders in
@@ -10,6 +10,7 @@ workdir already holds checkpoints. Writes ``out/runs/NAME/train_summary.json`` (
 """
 import argparse
 import json
+import tomllib
 import pathlib
 import sys
 
@@ -27,7 +28,7 @@ def main() -> int:
     ap.add_argument("config")
     ap.add_argument("--data", default=str(DEFAULT_DATA))
     a = ap.parse_args()
-    cfg = json.loads(pathlib.Path(a.config).read_text())
+    cfg = tomllib.loads(pathlib.Path(a.config).read_text())
     split = HERE / "out" / "splits" / cfg["name"]
     try:
         n = multitake.link_split(a.data, split, takes=cfg["train_takes"],

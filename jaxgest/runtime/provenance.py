@@ -45,6 +45,29 @@ def commit_of(path=None) -> tuple[str | None, bool | None]:
     return head, bool(status)
 
 
+def process_command(argv=None, root=None) -> list[str]:
+    """This process's command line as it can be typed again from ``root`` (default: the working directory):
+    a Python script as ``python PATH``, a package's ``__main__.py`` as ``python -m PACKAGE``, and paths under
+    ``root`` relative to it (an absolute path under a clone names that machine, not the experiment)."""
+    argv = list(sys.argv if argv is None else argv)
+    root = pathlib.Path(root if root is not None else pathlib.Path.cwd()).resolve()
+
+    def rel(arg: str) -> str:
+        try:
+            return str(pathlib.Path(arg).resolve().relative_to(root)) if pathlib.Path(arg).is_absolute() else arg
+        except ValueError:
+            return arg
+
+    head = pathlib.Path(argv[0]) if argv else pathlib.Path("python")
+    if head.name == "__main__.py":
+        first = ["python", "-m", ".".join(pathlib.Path(rel(str(head.parent))).parts)]
+    elif head.suffix == ".py":
+        first = ["python", rel(str(head))]
+    else:
+        first = [head.name]
+    return first + [rel(a) for a in argv[1:]]
+
+
 def stamp(config: dict, command: str | list | None = None, repo=None) -> dict:
     """The stamp of a result: commit (and whether the tree had uncommitted changes), package version,
     the resolved config (as given: a JSON-able dict) and the command (default: this process's argv)."""
@@ -52,7 +75,7 @@ def stamp(config: dict, command: str | list | None = None, repo=None) -> dict:
     import jax
 
     if command is None:
-        command = [pathlib.Path(sys.argv[0]).name, *sys.argv[1:]]
+        command = process_command()
     if not isinstance(command, str):
         command = shlex.join(str(c) for c in command)
     commit, dirty = commit_of(repo)

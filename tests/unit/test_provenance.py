@@ -32,3 +32,16 @@ def test_unstamped_file_refused(tmp_path, content):
     p.write_text(content)
     with pytest.raises(DataError, match="bad.json"):
         provenance.read_results(p)
+
+
+def test_process_command_can_be_typed_again(tmp_path):
+    root = tmp_path
+    (root / "experiments" / "x").mkdir(parents=True)
+    script = root / "experiments" / "x" / "evaluate.py"
+    cfg = root / "experiments" / "x" / "configs" / "a.toml"
+    assert provenance.process_command([str(script), str(cfg), "--seed", "1"], root) == [
+        "python", "experiments/x/evaluate.py", "experiments/x/configs/a.toml", "--seed", "1"]
+    main = root / "experiments" / "__main__.py"
+    assert provenance.process_command([str(main), "run", "/elsewhere/c.toml"], root) == [
+        "python", "-m", "experiments", "run", "/elsewhere/c.toml"]  # outside root: kept as given
+    assert provenance.process_command(["/usr/bin/jaxgest", "bench"], root) == ["jaxgest", "bench"]

@@ -201,7 +201,7 @@ def _evaluate(args) -> int:
 
 def _evaluate_claims(args, out) -> int:
     from jaxgest.runtime.provenance import write_results
-    from jaxgest.zeggs import claims
+    from jaxgest.zeggs import claims_run
 
     other = [flag for flag, on in (("--probe-data", args.probe_data), ("--probe-seeds", args.probe_seeds),
                                    ("--no-generation", args.no_generation), ("--max-clips", args.max_clips)) if on]
@@ -210,9 +210,9 @@ def _evaluate_claims(args, out) -> int:
     styles = tuple(s.strip() for s in args.speech_styles.split(",") if s.strip())
     if args.speech and not styles:
         raise JaxgestError(f"--speech-styles {args.speech_styles!r}: expected comma-separated style names")
-    result, config = claims.run(args.workdir, args.data, heldout=args.heldout, heldout_seeds=args.heldout_seeds,
+    result, config = claims_run.run(args.workdir, args.data, heldout=args.heldout, heldout_seeds=args.heldout_seeds,
                                 speech=args.speech, speech_styles=styles, segment_s=args.segment_seconds,
                                 seed=args.seed, substitute=args.substitute)
     write_results(out, result, config)
-    print(claims.markdown(result))
+    print(claims_run.markdown(result))
     return 0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jaxgest.runtime.errors import DataError
-from jaxgest.zeggs import claims
+from jaxgest.zeggs import claims, claims_run
 
 
 @pytest.fixture(scope="module")
@@ -76,19 +76,19 @@ def test_claim_items_partners(sets):
 
 def test_gt_holds_and_mm_fails(sets):
     train, held = sets
-    gt = claims.evaluate_claims(None, train, held, substitute="gt")
+    gt = claims_run.evaluate_claims(None, train, held, substitute="gt")
     sp = gt["style_portrayal"]
     assert sp["holds"] and sp["ratio_to_gt"] == 1.0 and sp["gt"]["mean"] > sp["mm"]["mean"] + 0.3
     assert gt["realism"]["holds"] and gt["realism"]["geometric_mean_ratio"] < 1e-3  # the real clips themselves
     # MM of another style: the classifier's accuracy collapses and the style claim fails
-    mm = claims.evaluate_claims(None, train, held, substitute="mm-style")
+    mm = claims_run.evaluate_claims(None, train, held, substitute="mm-style")
     assert not mm["style_portrayal"]["holds"]
     assert mm["style_portrayal"]["generated"]["mean"] < 0.5 * sp["generated"]["mean"]
     # MM of another script: appropriateness cannot beat itself
-    mm = claims.evaluate_claims(None, train, held, substitute="mm-script")
+    mm = claims_run.evaluate_claims(None, train, held, substitute="mm-script")
     ap = mm["appropriateness"]
     assert not ap["holds"] and ap["generated_minus_mm"]["mean"] == 0.0
-    md = claims.markdown({"claims": mm})
+    md = claims_run.markdown({"claims": mm})
     assert "does not hold" in md and "| sad |" in md
 
 
@@ -103,7 +103,7 @@ def test_damped_motion_fails_realism_and_style(sets):
                                  translations=np.repeat(m.translations[:1], m.num_frames, 0)))
         return out
 
-    r = claims.evaluate_claims(None, train, held, generate=frozen)
+    r = claims_run.evaluate_claims(None, train, held, generate=frozen)
     assert not r["realism"]["holds"] and r["realism"]["geometric_mean_ratio"] > 2.0
     assert not r["style_portrayal"]["holds"]
     assert not r["appropriateness"]["holds"] or r["appropriateness"]["clips_without_beats"] > 0
@@ -112,18 +112,18 @@ def test_damped_motion_fails_realism_and_style(sets):
 def test_substitute_and_model_errors(sets):
     train, held = sets
     with pytest.raises(DataError, match="unknown substitute"):
-        claims.evaluate_claims(None, train, held, substitute="nope")
+        claims_run.evaluate_claims(None, train, held, substitute="nope")
     with pytest.raises(DataError, match="no model"):
-        claims.evaluate_claims(None, train, held)
+        claims_run.evaluate_claims(None, train, held)
 
 
 def test_speech_segments(tmp_path):
     import soundfile as sf
 
     sf.write(tmp_path / "a.wav", np.zeros(16000 * 25, np.float32), 16000)
-    segs = claims.speech_segments(tmp_path / "a.wav", 10.0)
+    segs = claims_run.speech_segments(tmp_path / "a.wav", 10.0)
     assert [round(s[2]) for s in segs] == [0, 10, 20] and len(segs[-1][0]) == 16000 * 5
-    assert len(claims.speech_segments(tmp_path / "a.wav", 60.0)) == 1  # shorter than one segment: one
+    assert len(claims_run.speech_segments(tmp_path / "a.wav", 60.0)) == 1  # shorter than one segment: one
 
 
 def test_exclude_styles_data_and_override(sets):
@@ -155,7 +155,7 @@ def test_full_size_substitutes(tmp_path_factory):
         write_dataset(root / f"seed{k}", seed=k, progress=False)
     train = load_folder(root / "seed0")
     held = [(f"seed{k}", load_folder(root / f"seed{k}")) for k in (1, 2)]
-    gt = claims.evaluate_claims(None, train, held, substitute="gt")
+    gt = claims_run.evaluate_claims(None, train, held, substitute="gt")
     assert gt["style_portrayal"]["holds"] and gt["realism"]["holds"] and gt["appropriateness"]["holds"]
-    assert not claims.evaluate_claims(None, train, held, substitute="mm-style")["style_portrayal"]["holds"]
-    assert not claims.evaluate_claims(None, train, held, substitute="mm-script")["appropriateness"]["holds"]
+    assert not claims_run.evaluate_claims(None, train, held, substitute="mm-style")["style_portrayal"]["holds"]
+    assert not claims_run.evaluate_claims(None, train, held, substitute="mm-script")["appropriateness"]["holds"]

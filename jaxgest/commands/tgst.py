@@ -89,9 +89,15 @@ def _evaluate(args) -> int:
         html_dir = prepare_html_dir(args.html)
     methods = None if args.methods is None else tuple(m.strip() for m in args.methods.split(",") if m.strip())
     contents = None if args.contents is None else [c.strip() for c in args.contents.split(",") if c.strip()]
+    model = None
+    if html_dir is not None:  # loaded (and compiled) once, for the evaluation and the pages
+        from jaxgest.tgst.api import load_model
+
+        model = load_model(args.workdir)
     report = evaluate(
         args.workdir,
         args.data,
+        model=model,
         pairs=args.pairs,
         methods=methods,
         max_pairs=args.max_pairs,
@@ -134,10 +140,9 @@ def _evaluate(args) -> int:
         print(validity_table(report["metric_validity"]))
     if html_dir is not None:
         from jaxgest.motion.datasets import load_folder
-        from jaxgest.tgst.api import load_model
         from jaxgest.viewer import tgst_evaluation_pages
 
-        pages = tgst_evaluation_pages(report, load_model(args.workdir), load_folder(args.data, progress=False),
+        pages = tgst_evaluation_pages(report, model, load_folder(args.data, progress=False),
                                       html_dir)
         print("\n3D viewer pages: " + ", ".join(str(p) for p in pages))
     return 0

@@ -183,7 +183,12 @@ def _evaluate(args) -> int:
         if args.no_generation:
             raise DataError("--html shows generated clips; it cannot go with --no-generation")
         html_dir = prepare_html_dir(args.html)
-    result = evaluate(args.workdir, args.data, seed=args.seed, max_clips=args.max_clips,
+    model = None
+    if html_dir is not None:  # loaded (and compiled) once, for the evaluation and the pages
+        from jaxgest.zeggs.inference import load_model
+
+        model = load_model(args.workdir)
+    result = evaluate(args.workdir, args.data, seed=args.seed, max_clips=args.max_clips, model=model,
                       probe_data=args.probe_data, probe_seeds=args.probe_seeds,
                       generation=not args.no_generation)
     write_text_atomic(out, json.dumps(result, indent=2) + "\n")
@@ -191,9 +196,8 @@ def _evaluate(args) -> int:
     if html_dir is not None:
         from jaxgest.motion.datasets import load_folder
         from jaxgest.viewer import zeggs_evaluation_pages
-        from jaxgest.zeggs.inference import load_model
 
-        pages = zeggs_evaluation_pages(result, load_model(args.workdir), load_folder(args.data), html_dir,
+        pages = zeggs_evaluation_pages(result, model, load_folder(args.data), html_dir,
                                        seed=args.seed)
         print("\n3D viewer pages: " + ", ".join(str(p) for p in pages))
     return 0

@@ -118,21 +118,21 @@ def probe_datasets(probe_data=(), probe_seeds: int = 0, *, tmp_dir=None, progres
 
 
 def evaluate(workdir, data_dir, *, seed: int = 0, max_clips: Optional[int] = None, progress: bool = True,
-             probe_data=(), probe_seeds: int = 0, generation: bool = True) -> dict:
+             probe_data=(), probe_seeds: int = 0, generation: bool = True, model=None) -> dict:
     """All three figures for a trained model on a data folder (see the module docstring).
 
     ``probe_data`` (folders) / ``probe_seeds`` (synthetic seeds 1..N, generated in a temporary folder):
     also the probes on those datasets pooled (:func:`jaxgest.zeggs.probes.pooled_probe`; the same
     leave-one-content-out folds over the pooled clips, CIs over clips and over datasets) as
     ``probe_pooled``. ``generation=False`` skips beat alignment and the Fréchet distance (probes and
-    leakage only)."""
+    leakage only). ``model``: the loaded model of ``workdir`` when the caller has it already."""
     import tempfile
 
     from tqdm.auto import tqdm
 
     if probe_seeds < 0:
         raise DataError(f"--probe-seeds must be >= 0, got {probe_seeds}")
-    model = load_model(workdir)
+    model = load_model(workdir) if model is None else model
     clips = load_folder(data_dir)
     if not clips:
         raise DataError(f"{data_dir}: no clips")

@@ -1,6 +1,6 @@
 """Evaluate one trained run of this experiment on the test takes (006-008) and write a stamped results file.
 
-    python experiments/tgst_bandai2/evaluate.py experiments/tgst_bandai2/configs/full_s0.toml [--data DIR]
+    python experiments/tgst_bandai2/evaluate.py experiments/tgst_bandai2/runs/full_s0.toml [--data DIR]
     python experiments/tgst_bandai2/evaluate.py --table1 [--data DIR]     # data only: Table 1, cross form
 
 Model runs: pairs of :func:`jaxgest.tgst.multitake.make_multitake_pairs` (one exemplar take per content

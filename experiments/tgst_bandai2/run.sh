@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
-# This experiment from scratch, one step at a time or all of it (logs in out/logs):
-#   bash experiments/tgst_bandai2/run.sh [all|train|evaluate|tables] [configs/NAME.toml ...]
-# all (default): train every config given (default: every configs/*.toml, one at a time), evaluate them,
+# This experiment from scratch, one step at a time or all of it (logs in out/logs). Its runs are in runs/
+# (not configs/: that folder name is for configs of the experiments driver, python -m experiments):
+#   bash experiments/tgst_bandai2/run.sh [all|train|evaluate|tables] [runs/NAME.toml ...]
+# all (default): train every config given (default: every runs/*.toml, one at a time), evaluate them,
 # Table 1 (data only), then rewrite the README tables (about 1 h on 2 cores; needs ../shared/data/bandai-namco-2).
 set -euo pipefail
 HERE="$(cd "$(dirname "$0")" && pwd)"
 STEP="${1:-all}"; shift || true
 CONFIGS=()
 for c in "$@"; do CONFIGS+=("$(realpath "$c")"); done
-[ ${#CONFIGS[@]} -eq 0 ] && CONFIGS=("$HERE"/configs/*.toml)
+[ ${#CONFIGS[@]} -eq 0 ] && CONFIGS=("$HERE"/runs/*.toml)
 cd "$HERE/../.."
 export PYTHONPATH="$PWD" JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=0.2 MPLBACKEND=Agg
 PY="${PYTHON:-python}"

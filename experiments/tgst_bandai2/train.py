@@ -1,6 +1,6 @@
-"""Train one run of this experiment from its config file (``configs/NAME.toml``) into ``out/runs/NAME``.
+"""Train one run of this experiment from its config file (``runs/NAME.toml``) into ``out/runs/NAME``.
 
-    python experiments/tgst_bandai2/train.py experiments/tgst_bandai2/configs/full_s0.toml [--data DIR]
+    python experiments/tgst_bandai2/train.py experiments/tgst_bandai2/runs/full_s0.toml [--data DIR]
 
 The training folder ``out/splits/NAME`` holds symlinks to the Bandai-Namco-2 clips of the config's
 ``train_takes`` (001-004), without ``hold_out_content`` (zero-shot runs), plus every clip of the folders in

@@ -151,6 +151,9 @@ class Case:
     # work of one call of an implementation: ``work(impl_name) -> (flops, bytes)`` (the compulsory memory
     # traffic), for the floor fraction (:func:`floor`)
     work: Optional[Callable[[str], tuple]] = None
+    # flops XLA's cost analysis leaves out (it counts a while loop's body once, :func:`xla_cost`):
+    # ``uncounted_flops() -> flops`` is added to the jit's count for the work of a call (without ``work``)
+    uncounted_flops: Optional[Callable[[], float]] = None
 
     @property
     def num_poses(self) -> int:
@@ -417,7 +420,8 @@ def run_case(case: Case, *, repeats: int = 7, impls: Optional[Sequence[str]] = N
         rec["per_pose_us"] = rec["median_us"] / case.num_poses
         rec["per_frame_us"] = rec["median_us"] / case.frames
         work = (case.work(impl.name) if case.work is not None
-                else (jit_cost["flops"], io_bytes) if jit_cost and io_bytes is not None else None)
+                else (jit_cost["flops"] + (case.uncounted_flops() if case.uncounted_flops else 0.0), io_bytes)
+                if jit_cost and io_bytes is not None else None)
         if work is not None:
             flops, nbytes = work
             rec.update(flops=float(flops), bytes=float(nbytes))

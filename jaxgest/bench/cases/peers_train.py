@@ -30,15 +30,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from flax.training.train_state import TrainState
 
 from jaxgest.bench.cases import peers as PC
 from jaxgest.bench.harness import Case, Impl
 from jaxgest.tgst import model as TM
 from jaxgest.tgst import steps as TS
 from jaxgest.tgst.config import preset as tgst_config
+from jaxgest.zeggs.config import preset as zeggs_config_of
 
 BETA1 = 0.9
 RTOL, ATOL = 2e-3, 1e-6  # float32 forward + backward through ~30 ops; a wrong loss weight moves the loss by %
+# ZeroEGGS: float32 through a recurrent loop of T frames (errors grow along it) and 18 loss terms
+ZEGGS_RTOL, ZEGGS_ATOL = 2e-3, 1e-5
 
 
 def step_observables(step, keys):
@@ -164,6 +168,134 @@ def transformer_case(preset: str = "paper", *, with_torch: bool = True, batch: i
                      f"(fwd+bwd) and optimizer step compiled")
 
 
+# ------------------------------------------------------------------------------------------------------
+# ZeroEGGS
+# ------------------------------------------------------------------------------------------------------
+def bench_rig(num_joints: int, seed: int = 0) -> dict:
+    """A synthetic rig (``ModelConfig`` FK fields): joint j > 0 hangs from joint (j - 1) // 2 (a binary tree),
+    root and hips translated, rest offsets of 5-20 cm. A training run takes its rig from the data
+    (:func:`jaxgest.zeggs.features.fk_fields`), so the position terms use FK as in ``jaxgest zeggs train``."""
+    rng = np.random.default_rng(seed)
+    parents = (-1,) + tuple((j - 1) // 2 for j in range(1, num_joints))
+    offsets = rng.uniform(-1.0, 1.0, (num_joints, 3))
+    offsets = offsets / np.linalg.norm(offsets, axis=1, keepdims=True) * rng.uniform(5.0, 20.0, (num_joints, 1))
+    offsets[0] = 0.0
+    return {"fk_parents": parents, "fk_offsets": tuple(float(x) for x in offsets.reshape(-1)),
+            "fk_translated": (0, 1) if num_joints > 1 else (0,)}
+
+
+def zeggs_config(preset: str = "small", *, rig: bool = True):
+    """The preset without dropout (the peer cannot reproduce JAX's dropout masks; dropout is a few
+    elementwise ops next to the convs, attention and the GRU loop) and, with ``rig``, with
+    :func:`bench_rig` (FK position terms on, as a training run on data). Everything else is the preset's,
+    including ``small``'s initial-pose shuffle (ported)."""
+    cfg = zeggs_config_of(preset)
+    fields = dict(speech_dropout=0.0, style_dropout=0.0, style_attention_dropout=0.0)
+    if rig:
+        fields.update(bench_rig(cfg.model.num_joints))
+    return cfg.override(**fields)
+
+
+def step_draws(cfg, key, step: int, batch: int) -> dict:
+    """What the JAX step draws from its key (:func:`jaxgest.zeggs.steps.loss_terms` after
+    ``make_update_step(fold_in_step=True)``): ``eps`` ``(B, D_e)`` of the style sample and ``swap`` ``(B,)``
+    the rows started from a replaced pose. Mirrors that derivation; a drift shows as a failed check."""
+    from jaxgest.zeggs.steps import initial_pose_swaps
+
+    t = cfg.train
+    key = jax.random.fold_in(key, jnp.asarray(step, jnp.int32))
+    _, k_sample = jax.random.split(key)
+    swap = initial_pose_swaps(jax.random.fold_in(key, 0x1_5E), t.initial_pose_shuffle, batch)
+    if t.initial_pose_source == "row" and batch == 1:
+        swap = jnp.zeros_like(swap)
+    eps = jax.random.normal(k_sample, (batch, cfg.model.style_embedding), jnp.float32)
+    return {"eps": np.asarray(eps), "swap": np.asarray(swap)}
+
+
+def _zeggs_params(cfg, seed: int = 0):
+    """``init_params`` with small random biases (init's are zero: a mis-laid bias would go unseen)."""
+    from jaxgest.zeggs.model import init_params
+
+    params = init_params(cfg.model, jax.random.key(seed))
+    rng = np.random.default_rng(seed + 10)
+
+    def fill(path, leaf):
+        if "bias" in jax.tree_util.keystr(path[-1:]):
+            return jnp.asarray(rng.normal(scale=0.1, size=leaf.shape), jnp.float32)
+        return leaf
+
+    return jax.tree_util.tree_map_with_path(fill, params)
+
+
+def decoder_step_flops(cfg, batch: int) -> float:
+    """XLA's count of one generator frame, forward and backward (``jax.vjp`` of the scan body,
+    :class:`jaxgest.zeggs.generator.RecurrentDecoder`, at ``batch``)."""
+    from jaxgest.bench.harness import xla_cost
+    from jaxgest.zeggs.generator import RecurrentDecoder, input_scale
+    from jaxgest.zeggs.model import param_shapes
+
+    m = cfg.model
+    B, H, P = batch, m.gru_hidden, m.pose_dim
+    dec = param_shapes(m)["generator"]["decoder"]
+    z = lambda *s: jnp.zeros(s, jnp.float32)  # noqa: E731
+    mean, std = z(P), jnp.ones((P,), jnp.float32)
+    consts = (z(B, 3), mean, std, input_scale(m, mean, std))
+    q = z(B, 4).at[:, 0].set(1.0)
+
+    def f(p, carry, inputs):
+        out, vjp = jax.vjp(lambda p_, c_, i_: RecurrentDecoder(m).apply({"params": p_}, c_, i_, consts),
+                           p, carry, inputs)
+        return vjp(out)
+
+    carry = (tuple(z(B, H) for _ in range(m.gru_layers)), z(B, P), z(B, 3), q)
+    inputs = (z(B, m.speech_embedding), z(B, m.style_embedding))
+    p = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), dec)
+    cost = xla_cost(jax.jit(f).lower(p, carry, inputs).compile())
+    return cost["flops"] if cost else 0.0
+
+
+ZEGGS_KEYS = ("loss", "recon", "kl") + ("local_position", "world_position", "local_rotation", "world_rotation",
+                                         "local_velocity", "world_velocity", "local_angular", "world_angular",
+                                         "fd_local_position", "fd_world_position", "fd_local_rotation",
+                                         "fd_world_rotation", "root_position", "root_rotation", "root_velocity",
+                                         "root_angular", "facing", "predicted_position")
+
+
+def zeggs_case(preset: str = "small", *, with_torch: bool = True, batch: int | None = None,
+               window: int | None = None, style_frames: int | None = None, peer_cfg=None,
+               quick: bool = True) -> Case:
+    """One RAdam step of ZeroEGGS (:func:`zeggs_config`); ``peer_cfg``: the PyTorch peer's config (default
+    the same; a test passes a wrong one)."""
+    from jaxgest.bench.cases.training import zeggs_batch
+    from jaxgest.zeggs import steps as ZS
+
+    cfg = zeggs_config(preset)
+    t = cfg.train
+    b, f, s = batch or t.batch_size, window or t.window, style_frames or t.style_window_max
+    stats = ZS.pose_stats(cfg.model)
+    key = jax.random.key(0)
+    jit_step = jax.jit(step_observables(ZS.make_train_step(cfg), ZEGGS_KEYS), compiler_options=t.compiler_options)
+    impls = [Impl("jit", jit_step, kind="jit")]
+    if with_torch:
+        from jaxgest.bench.torch_peers.zeggs_train import ZeggsStepPeer
+
+        impls += torch_impls(lambda compiled: ZeggsStepPeer(peer_cfg or cfg, _zeggs_params(cfg), stats,
+                                                            step_draws(cfg, key, 0, b), compiled=compiled))
+
+    def make_args():
+        state = TrainState.create(apply_fn=None, params=_zeggs_params(cfg), tx=ZS.make_optimizer(cfg))
+        return state, zeggs_batch(cfg.model, b, f, s), key, stats
+
+    return Case(name=f"peer_train_zeggs_{preset}", batch=b, frames=f, impls=impls, make_args=make_args,
+                rtol=ZEGGS_RTOL, atol=ZEGGS_ATOL, interleave=True, max_repeats_slow=3, quick=quick,
+                uncounted_flops=lambda: (f - 2) * decoder_step_flops(cfg, b),
+                note=f"ZEGGS {preset} preset without dropout, synthetic rig (FK terms), one RAdam step, batch {b} "
+                     f"x {f} frames, style clips of {s} frames; torch threads {PC.threads()} / 1; torch_compile: "
+                     f"encoders, per-frame generator step, losses (fwd+bwd) and optimizer step compiled, frame "
+                     f"loop eager; flops = XLA's count + {f - 2} more scan bodies (fwd+bwd)")
+
+
 def cases(quick: bool) -> list:
     with_torch = PC.torch_available()
-    return [ae_case(with_torch=with_torch), transformer_case(with_torch=with_torch)]
+    return [ae_case(with_torch=with_torch), transformer_case(with_torch=with_torch),
+            zeggs_case("small", with_torch=with_torch), zeggs_case("paper", with_torch=with_torch, quick=False)]

@@ -45,13 +45,21 @@ def _norm(x, dim=-1):
 
 
 class _StepPeer:
-    """One optimiser step per call on fixed inputs (set by the first call); see the module docstring."""
+    """One optimiser step per call on fixed inputs (set by the first call); see the module docstring.
 
-    def __init__(self, params: list, lr: float, compiled: bool):
+    ``optimizer``: ``"adam"`` (``optax.adam``'s defaults) or ``"radam"`` (``optax.radam``'s: the same betas and
+    eps). ``compile_whole_loss = False`` in a subclass that compiles pieces of its loss itself.
+    """
+
+    compile_whole_loss = True
+
+    def __init__(self, params: list, lr: float, compiled: bool, optimizer: str = "adam"):
         self.params = params
-        self.opt = torch.optim.Adam(params, lr=lr, betas=(BETA1, 0.999), eps=1e-8)
+        kind = {"adam": torch.optim.Adam, "radam": torch.optim.RAdam}[optimizer]
+        self.opt = kind(params, lr=lr, betas=(BETA1, 0.999), eps=1e-8)
         self.compiled = compiled
-        self._loss = torch.compile(self.loss_terms, dynamic=False) if compiled else self.loss_terms
+        self._loss = (torch.compile(self.loss_terms, dynamic=False) if compiled and self.compile_whole_loss
+                      else self.loss_terms)
         self._opt_step = torch.compile(self.opt.step, dynamic=False) if compiled else self.opt.step
         self._inputs = None
 

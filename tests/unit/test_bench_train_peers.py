@@ -103,3 +103,82 @@ def test_compiled_autoencoder_training_peer_equals_the_eager_one():
                                                    **QUIET)}
     assert recs["torch_compile"]["reference"] == "torch"
     assert recs["torch_compile"]["compile_s"] > 0
+
+
+ZEGGS_TINY = dict(batch=4, window=24, style_frames=16)  # the tiny preset, shorter windows: seconds
+
+
+@needs_torch
+def test_zeggs_training_peer_equals_the_jax_step():
+    import jax
+
+    from jaxgest.bench.cases import peers_train as PT
+
+    case = PT.zeggs_case("tiny", **ZEGGS_TINY)
+    args = case.make_args()
+    outs = {i.name: jax.device_get(harness.prepare(i, args)[1]) for i in case.impls if i.name in ("jit", "torch")}
+    assert set(outs["torch"]) == set(outs["jit"]) >= {"loss", "kl", "kl_weight", "facing", "grad_norm"}
+    assert harness.check_equal(outs, rtol=case.rtol, atol=case.atol)["torch"] < 1e-2 * float(outs["jit"]["loss"])
+
+
+@needs_torch
+@pytest.mark.slow
+def test_zeggs_training_peer_case_counts_every_generator_frame():
+    from jaxgest.bench.cases import peers_train as PT
+
+    case = PT.zeggs_case("tiny", **ZEGGS_TINY)
+    jit, peer = harness.run_case(case, repeats=2, impls=["jit", "torch"], **QUIET)
+    assert peer["max_abs_diff"] is not None and peer["reference"] == "jit"
+    # XLA counts the generator's scan body once: the work adds the other frames' bodies
+    assert jit["flops"] > jit["xla_flops"] > 0 and peer["flops"] == jit["flops"]
+
+
+def test_zeggs_benchmark_draws_follow_the_steps_key_derivation():
+    """The shuffle's swapped rows of step_draws are those of steps.initial_pose_swaps on the step's key."""
+    import jax
+    import numpy as np
+
+    from jaxgest.bench.cases import peers_train as PT
+
+    cfg = PT.zeggs_config("small", rig=False)
+    assert cfg.train.initial_pose_shuffle > 0 and cfg.model.speech_dropout == 0.0
+    d = PT.step_draws(cfg, jax.random.key(0), 0, 64)
+    assert d["eps"].shape == (64, cfg.model.style_embedding) and 0 < d["swap"].sum() < 64
+    assert not np.array_equal(d["swap"], PT.step_draws(cfg, jax.random.key(0), 1, 64)["swap"])
+
+
+@needs_torch
+@pytest.mark.parametrize("field", ["w_local_position", "kl_center"])
+def test_a_zeggs_training_peer_with_a_wrong_loss_or_kl_weight_is_refused(field):
+    from jaxgest.bench.cases import peers_train as PT
+
+    cfg = PT.zeggs_config("tiny")
+    wrong = cfg.override(**{field: getattr(cfg.train, field) * 1.5 if field != "kl_center" else 0.0})
+    case = PT.zeggs_case("tiny", peer_cfg=wrong, **ZEGGS_TINY)
+    with pytest.raises(harness.EqualityError, match="^torch: output"):
+        harness.run_case(case, repeats=2, impls=["jit", "torch"], **QUIET)
+
+
+@needs_torch
+def test_the_zeggs_training_peer_refuses_what_it_does_not_port():
+    from jaxgest.bench.cases import peers_train as PT
+    from jaxgest.bench.torch_peers.zeggs_train import check_config
+    from jaxgest.zeggs.config import preset
+
+    with pytest.raises(ValueError, match="model.speech_dropout"):
+        check_config(preset("tiny"))  # the preset trains with dropout
+    with pytest.raises(ValueError, match="initial_pose_mask_seconds"):
+        check_config(PT.zeggs_config("small").override(initial_pose_mask_seconds=0.5))
+    check_config(PT.zeggs_config("small"))
+
+
+@needs_torch
+@pytest.mark.slow
+def test_compiled_zeggs_training_peer_equals_the_eager_one():
+    from jaxgest.bench.cases import peers_train as PT
+
+    case = PT.zeggs_case("tiny", **ZEGGS_TINY)
+    recs = {r["impl"]: r for r in harness.run_case(case, repeats=2, impls=["jit", "torch", "torch_compile"],
+                                                   **QUIET)}
+    assert recs["torch_compile"]["reference"] == "torch"
+    assert recs["torch_compile"]["compile_s"] > 0

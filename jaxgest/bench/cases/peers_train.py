@@ -14,11 +14,26 @@ the gradient norm and the update norm, checked equal (rtol ``RTOL``) on the firs
 The JAX step is called on the same input state each time (no donation); a PyTorch peer updates its own
 weights in place, call after call (the cost of a step does not depend on the weights).
 
-Work of a call: XLA's cost analysis of the jit step (no loops in these steps, so the count is complete),
-the same count for the peers; bytes = arguments + outputs of the JAX step.
+* ``peer_train_zeggs_small`` / ``peer_train_zeggs_paper`` (the latter not in ``--quick``): one RAdam step
+  of :func:`jaxgest.zeggs.steps.make_train_step` at the preset's batch, window and longest style clip
+  (:func:`jaxgest.bench.cases.training.zeggs_batch`: half the style clips shorter, masked), against
+  :class:`jaxgest.bench.torch_peers.zeggs_train.ZeggsStepPeer` (speech and style encoders, the official
+  generator loop, eq. 1-2 losses, KL, ``torch.optim.RAdam``). The benchmark config
+  (:func:`zeggs_config`) is the preset with every dropout rate 0 (JAX's dropout masks cannot be reproduced
+  in torch; dropout is a few elementwise ops) and a synthetic rig (:func:`bench_rig`: FK position terms on,
+  as a training run on data); ``small``'s initial-pose shuffle is kept (ported). The style-sample noise and
+  the shuffled rows are the JAX step's own draws (:func:`step_draws`, the step's key derivation), given to
+  the peer. Parameters: ``init_params`` with small random biases (:func:`_zeggs_params`), so a mis-laid
+  bias shows. Observables: as above plus ``recon``, ``kl``, ``kl_weight`` and every reconstruction term;
+  tolerance ``ZEGGS_RTOL`` / ``ZEGGS_ATOL`` (float32 through a T-frame recurrence; on ``tiny`` the peer
+  agrees to ~1e-7 relative; a 1.5x ``w_local_position`` moves the loss by ~1.4 %).
 
-ZeroEGGS training-step peers (``small`` / ``paper``) are not ported yet: the style encoder, speech
-encoder, dropout, the reconstruction terms and RAdam would all need a PyTorch port first.
+Work of a call: XLA's cost analysis of the jit step (no loops in the TGST steps, so the count is complete),
+the same count for the peers; bytes = arguments + outputs of the JAX step. The ZeroEGGS generator is an
+``nn.scan``: XLA counts a while loop's body once, so the cases add ``T - 2`` more bodies
+(``Case.uncounted_flops``; one body forward and backward = XLA's count of ``jax.vjp`` of
+:class:`jaxgest.zeggs.generator.RecurrentDecoder` at the batch, :func:`decoder_step_flops`) -- an estimate
+(the backward loop's residual bookkeeping is counted as in that one vjp).
 """
 
 from __future__ import annotations
@@ -254,7 +269,7 @@ def decoder_step_flops(cfg, batch: int) -> float:
     return cost["flops"] if cost else 0.0
 
 
-ZEGGS_KEYS = ("loss", "recon", "kl") + ("local_position", "world_position", "local_rotation", "world_rotation",
+ZEGGS_KEYS = ("loss", "recon", "kl", "kl_weight") + ("local_position", "world_position", "local_rotation", "world_rotation",
                                          "local_velocity", "world_velocity", "local_angular", "world_angular",
                                          "fd_local_position", "fd_world_position", "fd_local_rotation",
                                          "fd_world_rotation", "root_position", "root_rotation", "root_velocity",

@@ -108,13 +108,29 @@ def test_compiled_autoencoder_training_peer_equals_the_eager_one():
 ZEGGS_TINY = dict(batch=4, window=24, style_frames=16)  # the tiny preset, shorter windows: seconds
 
 
+def _pose_stats(seed=0, dim=15 * 5 + 6):
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    return {"mean": rng.normal(scale=0.3, size=dim), "std": rng.uniform(0.5, 2.0, dim)}
+
+
 @needs_torch
-def test_zeggs_training_peer_equals_the_jax_step():
+@pytest.mark.parametrize("variant", ["preset", "shuffled_rows_sum_kl_stats"])
+def test_zeggs_training_peer_equals_the_jax_step(variant):
+    """The tiny preset (no dropout, a rig); and with half the rows started from the previous row's pose,
+    the exact KL (sum) and non-identity pose statistics (denormalised losses, group input scale)."""
     import jax
 
     from jaxgest.bench.cases import peers_train as PT
 
-    case = PT.zeggs_case("tiny", **ZEGGS_TINY)
+    if variant == "preset":
+        case = PT.zeggs_case("tiny", **ZEGGS_TINY)
+    else:
+        fields = dict(initial_pose_shuffle=0.5, initial_pose_source="row", kl_reduction="sum")
+        cfg = PT.zeggs_config("tiny", **fields)
+        assert PT.step_draws(cfg, jax.random.key(0), 0, ZEGGS_TINY["batch"])["swap"].any()
+        case = PT.zeggs_case("tiny", fields=fields, stats=_pose_stats(), **ZEGGS_TINY)
     args = case.make_args()
     outs = {i.name: jax.device_get(harness.prepare(i, args)[1]) for i in case.impls if i.name in ("jit", "torch")}
     assert set(outs["torch"]) == set(outs["jit"]) >= {"loss", "kl", "kl_weight", "facing", "grad_norm"}

@@ -25,7 +25,7 @@ The model cases live in ``tgst`` (transfer, clip-length scaling, stages), ``zegg
 style encoder, speech encoder and features), ``training`` (one optimiser step per model),
 ``zeggs_variants`` (benchmark-local generator optimisation experiments, full run only), ``peers``
 (side by side with eager and compiled (``torch.compile``) PyTorch ports of the authors' networks, interleaved
-rounds; weight formats of the ZeroEGGS generator) and ``peers_train`` (TGST training steps side by side
+rounds; weight formats of the ZeroEGGS generator) and ``peers_train`` (TGST and ZeroEGGS training steps side by side
 with eager and compiled PyTorch training steps). ``jaxgest bench --cases peer_`` runs both peer modules.
 """
 

@@ -199,13 +199,13 @@ def bench_rig(num_joints: int, seed: int = 0) -> dict:
             "fk_translated": (0, 1) if num_joints > 1 else (0,)}
 
 
-def zeggs_config(preset: str = "small", *, rig: bool = True):
+def zeggs_config(preset: str = "small", *, rig: bool = True, **fields):
     """The preset without dropout (the peer cannot reproduce JAX's dropout masks; dropout is a few
     elementwise ops next to the convs, attention and the GRU loop) and, with ``rig``, with
     :func:`bench_rig` (FK position terms on, as a training run on data). Everything else is the preset's,
-    including ``small``'s initial-pose shuffle (ported)."""
+    including ``small``'s initial-pose shuffle (ported). ``fields``: further bare-name overrides (tests)."""
     cfg = zeggs_config_of(preset)
-    fields = dict(speech_dropout=0.0, style_dropout=0.0, style_attention_dropout=0.0)
+    fields = dict(speech_dropout=0.0, style_dropout=0.0, style_attention_dropout=0.0, **fields)
     if rig:
         fields.update(bench_rig(cfg.model.num_joints))
     return cfg.override(**fields)
@@ -278,16 +278,17 @@ ZEGGS_KEYS = ("loss", "recon", "kl", "kl_weight") + ("local_position", "world_po
 
 def zeggs_case(preset: str = "small", *, with_torch: bool = True, batch: int | None = None,
                window: int | None = None, style_frames: int | None = None, peer_cfg=None,
-               quick: bool = True) -> Case:
-    """One RAdam step of ZeroEGGS (:func:`zeggs_config`); ``peer_cfg``: the PyTorch peer's config (default
-    the same; a test passes a wrong one)."""
+               quick: bool = True, fields: dict | None = None, stats: dict | None = None) -> Case:
+    """One RAdam step of ZeroEGGS (:func:`zeggs_config` with ``fields``); ``peer_cfg``: the PyTorch peer's
+    config (default the same; a test passes a wrong one); ``stats``: pose ``{"mean", "std"}`` (default
+    identity, as the training-step cases)."""
     from jaxgest.bench.cases.training import zeggs_batch
     from jaxgest.zeggs import steps as ZS
 
-    cfg = zeggs_config(preset)
+    cfg = zeggs_config(preset, **(fields or {}))
     t = cfg.train
     b, f, s = batch or t.batch_size, window or t.window, style_frames or t.style_window_max
-    stats = ZS.pose_stats(cfg.model)
+    stats = ZS.pose_stats(cfg.model, **(stats or {}))
     key = jax.random.key(0)
     jit_step = jax.jit(step_observables(ZS.make_train_step(cfg), ZEGGS_KEYS), compiler_options=t.compiler_options)
     impls = [Impl("jit", jit_step, kind="jit")]

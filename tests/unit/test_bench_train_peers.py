@@ -105,7 +105,7 @@ def test_compiled_autoencoder_training_peer_equals_the_eager_one():
     assert recs["torch_compile"]["compile_s"] > 0
 
 
-ZEGGS_TINY = dict(batch=4, window=24, style_frames=16)  # the tiny preset, shorter windows: seconds
+ZEGGS_TINY = {"batch": 4, "window": 24, "style_frames": 16}  # the tiny preset, shorter windows: seconds
 
 
 def _pose_stats(seed=0, dim=15 * 5 + 6):
@@ -127,14 +127,16 @@ def test_zeggs_training_peer_equals_the_jax_step(variant):
     if variant == "preset":
         case = PT.zeggs_case("tiny", **ZEGGS_TINY)
     else:
-        fields = dict(initial_pose_shuffle=0.5, initial_pose_source="row", kl_reduction="sum")
+        fields = {"initial_pose_shuffle": 0.5, "initial_pose_source": "row", "kl_reduction": "sum"}
         cfg = PT.zeggs_config("tiny", **fields)
         assert PT.step_draws(cfg, jax.random.key(0), 0, ZEGGS_TINY["batch"])["swap"].any()
         case = PT.zeggs_case("tiny", fields=fields, stats=_pose_stats(), **ZEGGS_TINY)
     args = case.make_args()
-    outs = {i.name: jax.device_get(harness.prepare(i, args)[1]) for i in case.impls if i.name in ("jit", "torch")}
+    outs = {i.name: jax.device_get(harness.prepare(i, args)[1])
+            for i in case.impls if i.name in ("jit", "torch")}
     assert set(outs["torch"]) == set(outs["jit"]) >= {"loss", "kl", "kl_weight", "facing", "grad_norm"}
-    assert harness.check_equal(outs, rtol=case.rtol, atol=case.atol)["torch"] < 1e-2 * float(outs["jit"]["loss"])
+    diff = harness.check_equal(outs, rtol=case.rtol, atol=case.atol)["torch"]  # raises beyond tolerance
+    assert diff < 1e-2 * float(outs["jit"]["loss"])
 
 
 @needs_torch

@@ -252,7 +252,9 @@ def decoder_step_flops(cfg, batch: int) -> float:
     m = cfg.model
     B, H, P = batch, m.gru_hidden, m.pose_dim
     dec = param_shapes(m)["generator"]["decoder"]
-    z = lambda *s: jnp.zeros(s, jnp.float32)  # noqa: E731
+    def z(*shape):
+        return jnp.zeros(shape, jnp.float32)
+
     mean, std = z(P), jnp.ones((P,), jnp.float32)
     consts = (z(B, 3), mean, std, input_scale(m, mean, std))
     q = z(B, 4).at[:, 0].set(1.0)
@@ -269,11 +271,10 @@ def decoder_step_flops(cfg, batch: int) -> float:
     return cost["flops"] if cost else 0.0
 
 
-ZEGGS_KEYS = ("loss", "recon", "kl", "kl_weight") + ("local_position", "world_position", "local_rotation", "world_rotation",
-                                         "local_velocity", "world_velocity", "local_angular", "world_angular",
-                                         "fd_local_position", "fd_world_position", "fd_local_rotation",
-                                         "fd_world_rotation", "root_position", "root_rotation", "root_velocity",
-                                         "root_angular", "facing", "predicted_position")
+ZEGGS_KEYS = ("loss", "recon", "kl", "kl_weight", "local_position", "world_position", "local_rotation",
+              "world_rotation", "local_velocity", "world_velocity", "local_angular", "world_angular",
+              "fd_local_position", "fd_world_position", "fd_local_rotation", "fd_world_rotation", "root_position",
+              "root_rotation", "root_velocity", "root_angular", "facing", "predicted_position")
 
 
 def zeggs_case(preset: str = "small", *, with_torch: bool = True, batch: int | None = None,
@@ -290,7 +291,8 @@ def zeggs_case(preset: str = "small", *, with_torch: bool = True, batch: int | N
     b, f, s = batch or t.batch_size, window or t.window, style_frames or t.style_window_max
     stats = ZS.pose_stats(cfg.model, **(stats or {}))
     key = jax.random.key(0)
-    jit_step = jax.jit(step_observables(ZS.make_train_step(cfg), ZEGGS_KEYS), compiler_options=t.compiler_options)
+    jit_step = jax.jit(step_observables(ZS.make_train_step(cfg), ZEGGS_KEYS),
+                       compiler_options=t.compiler_options)
     impls = [Impl("jit", jit_step, kind="jit")]
     if with_torch:
         from jaxgest.bench.torch_peers.zeggs_train import ZeggsStepPeer

@@ -47,8 +47,8 @@ total), each forward and, through AOTAutograd, backward, and the optimiser step.
 
 Observables per call (as :func:`jaxgest.bench.cases.peers_train.step_observables`): the loss, ``recon``,
 ``kl``, ``kl_weight`` (at step 0 the KL is ~1e-5 of the loss on a random batch, so the loss alone would not
-catch a wrong KL weight) and every reconstruction term (batch means, before the update), ``grad_norm`` (``||m_1|| / (1 -
-beta1)`` from RAdam's first moment) and ``update_norm``.
+catch a wrong KL weight) and every reconstruction term (batch means, before the update), ``grad_norm``
+(``||m_1|| / (1 - beta1)`` from RAdam's first moment) and ``update_norm``.
 
 References: Ghorbani et al. 2023, §3 (Fig. 2-4), §4.2-4.3, eqs. 1-2; Liu et al. 2019 (RAdam).
 """
@@ -59,8 +59,8 @@ import math
 
 import numpy as np
 import torch
-import torch.nn as nn
 import torch.nn.functional as F
+from torch import nn
 
 from jaxgest.bench.torch_peers.common import tensor
 from jaxgest.bench.torch_peers.tgst_train import _StepPeer
@@ -190,8 +190,8 @@ class Losses(nn.Module):
         self.fk = bool(model_cfg.fk_parents)
         if self.fk:
             if len(model_cfg.fk_parents) != j or len(model_cfg.fk_offsets) != 3 * j:
-                raise ValueError(f"fk_parents / fk_offsets describe {len(model_cfg.fk_parents)} joints, the model "
-                                 f"has {j}")
+                raise ValueError(f"fk_parents / fk_offsets describe {len(model_cfg.fk_parents)} joints, the "
+                                 f"model has {j}")
             anchor, chain = fk_chain_matrix(model_cfg.fk_parents, model_cfg.fk_translated)
             self.anchor = torch.as_tensor(anchor)
             self.parents = torch.as_tensor(np.maximum(np.asarray(model_cfg.fk_parents), 0))
@@ -281,7 +281,8 @@ class Losses(nn.Module):
 def kl_weight(step: int, train_cfg) -> float:
     """:func:`jaxgest.zeggs.losses.kl_weight` (float32 logistic, capped)."""
     s = torch.tensor(float(step), dtype=torch.float32)
-    return float(torch.clamp(torch.sigmoid(train_cfg.kl_growth * (s - train_cfg.kl_center)), max=train_cfg.kl_cap))
+    w = torch.sigmoid(train_cfg.kl_growth * (s - train_cfg.kl_center))
+    return float(torch.clamp(w, max=train_cfg.kl_cap))
 
 
 def check_config(cfg) -> None:

@@ -34,10 +34,14 @@ def yes(ok) -> str:
     return "holds" if ok else "no"
 
 
+def _section(runs, key, title) -> tuple:
+    """The runs whose results file has ``key``, with their documents, and the section's heading lines."""
+    docs = [(r, d) for r, d in ((r, load(r)) for r in runs) if d and key in d["results"]]
+    return docs, [f"### {title}", ""]
+
+
 def claims_table(runs, title) -> list:
-    docs = [(r, load(r)) for r in runs]
-    docs = [(r, d) for r, d in docs if d and "claims" in d["results"]]
-    lines = [f"### {title}", ""]
+    docs, lines = _section(runs, "claims", title)
     if not docs:
         return lines + ["not yet run", ""]
     lines += ["| run (step) | 1. style: generated | GT | MM | ratio | 3. realism: Fréchet ratio (geo. mean) | "
@@ -85,9 +89,7 @@ def zero_shot_table(runs, title) -> list:
 
 
 def speech_table(runs, title) -> list:
-    docs = [(r, load(r)) for r in runs]
-    docs = [(r, d) for r, d in docs if d and "real_speech" in d["results"]]
-    lines = [f"### {title}", ""]
+    docs, lines = _section(runs, "real_speech", title)
     if not docs:
         return lines + ["not yet run", ""]
     lines += ["| run | style | BeatAlign generated | MM | generated - MM | generated - shuffled | classifier: "

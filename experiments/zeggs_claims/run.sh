@@ -4,7 +4,9 @@
 # Per run: trains out/RUN (resumes; skipped when done), then `jaxgest zeggs evaluate --claims` on the 8
 # held-out script datasets and the real speech -> out/claims_RUN.json (stamped) and out/claims_RUN.md.
 # Data (written once): out/data = jaxgest synth --seed 0 (training scripts), out/heldout/seedK, K = 1..8.
-# Environment: PYTHON (default python), HELDOUT (default 8), SHARED (default: ../shared beside the repo).
+# Environment: PYTHON (default python), HELDOUT (default 8), SHARED (default: ../shared beside the repo),
+# JOBS (default 1): with JOBS=N the runs are dealt round-robin to N queues, each pinned to one core (taskset) with
+# XLA's intra-op threads at 1 -- more runs per hour than one run on all cores (docs/benchmarks.md).
 set -euo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"; ROOT="$(cd "$HERE/../.." && pwd)"
 PY="${PYTHON:-python}"; OUT="$HERE/out"; HELDOUT="${HELDOUT:-8}"
@@ -20,7 +22,9 @@ for k in $(seq 1 "$HELDOUT"); do
 done
 speech=(); for w in "$SPEECH_DIR"/zeggs/*.wav "$SPEECH_DIR"/beat2/*.wav; do [ -f "$w" ] && speech+=("$w"); done
 runs=("$@"); [ ${#runs[@]} -gt 0 ] || mapfile -t runs < <(grep -v '^#' "$HERE/runs.tsv" | cut -f1 | grep -v '^pilot')
-for run in "${runs[@]}"; do
+JOBS="${JOBS:-1}"
+one_run() {
+  local run="$1" line name preset steps seed exclude s t
   line=$(grep -P "^$run\t" "$HERE/runs.tsv") || { echo "run.sh: no run $run in runs.tsv" >&2; exit 2; }
   IFS=$'\t' read -r name preset steps seed exclude <<< "$line"
   ov=(); [ "$exclude" = "-" ] || ov=(--override "train.exclude_styles=$exclude")
@@ -32,5 +36,19 @@ for run in "${runs[@]}"; do
   "${J[@]}" zeggs evaluate --workdir "$OUT/$name" --data "$OUT/data" --claims --heldout "${held[@]}" "${sp[@]}" \
       --json "$OUT/claims_$name.json" > "$OUT/claims_$name.md"
   echo "$name: evaluated in $(( $(date +%s) - t )) s"
-done
+}
+for run in "${runs[@]}"; do grep -qP "^$run\t" "$HERE/runs.tsv" || { echo "run.sh: no run $run in runs.tsv" >&2; exit 2; }; done
+if [ "$JOBS" -le 1 ]; then
+  for run in "${runs[@]}"; do one_run "$run"; done
+else
+  export XLA_FLAGS="--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1${XLA_FLAGS:+ $XLA_FLAGS}"
+  pids=()
+  for ((k = 0; k < JOBS; k++)); do
+    ( taskset -cp "$(( k % $(nproc) ))" "$BASHPID" > /dev/null
+      for ((i = k; i < ${#runs[@]}; i += JOBS)); do one_run "${runs[$i]}"; done ) &
+    pids+=($!)
+  done
+  status=0; for p in "${pids[@]}"; do wait "$p" || status=1; done
+  [ "$status" -eq 0 ] || { echo "run.sh: a run failed (see out/train_RUN.log)" >&2; exit 1; }
+fi
 "$PY" "$HERE/tables.py"

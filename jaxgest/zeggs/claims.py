@@ -278,6 +278,42 @@ def style_portrayal(classifier: StyleClassifier, items, generated, cache: dict |
     return out
 
 
+def hand_speeds(items, generated) -> dict:
+    """Diagnostic of criterion 1 (not a gate): is the generated motion damped, is its handedness kept?
+
+    Per clip the mean speed of each hand (world positions, file units per second; :func:`jaxgest.metrics.hand_speed`)
+    of the generated motion, of GT (the real held-out clip) and of the style example. ``per_style``: means over
+    the style's clips (``left`` / ``right`` per source) and ``ratio`` = generated / GT of the summed hand speed;
+    ``ratio``: generated / GT per clip (summed hands) with an interval over datasets; ``left_share``: per source,
+    the left hand's share of the summed speed averaged over clips (handedness: a blurred generator moves toward
+    0.5 where GT is lopsided)."""
+    from jaxgest.motion import body, kinematics
+
+    if len(generated) != len(items):
+        raise DataError(f"hand speeds: {len(generated)} motions for {len(items)} items")
+
+    def lr(motion):
+        pos = kinematics.forward_kinematics(motion)
+        idx = body.joint_indices(motion.skeleton, body.HANDS)  # (Hand_L, Hand_R)
+        return [float(metrics.hand_speed(pos, motion.fps, [i]).mean()) for i in idx]
+
+    rows = [{"generated": lr(g), "gt": lr(it.clip.motion), "example": lr(it.example.motion)}
+            for it, g in zip(items, generated)]
+    ratio = np.array([sum(r["generated"]) / sum(r["gt"]) if sum(r["gt"]) > 0 else np.nan for r in rows])
+    out = {"ratio": interval(ratio, [it.dataset for it in items]), "per_style": {}, "left_share": {}}
+    for src in ("generated", "gt", "example"):
+        share = [r[src][0] / sum(r[src]) for r in rows if sum(r[src]) > 0]
+        out["left_share"][src] = float(np.mean(share)) if share else float("nan")
+    for style in sorted({it.clip.style for it in items}, key=str):
+        sel = [r for it, r in zip(items, rows) if it.clip.style == style]
+        d = {src: {"left": float(np.mean([r[src][0] for r in sel])), "right": float(np.mean([r[src][1] for r in sel]))}
+             for src in ("generated", "gt", "example")}
+        gt = d["gt"]["left"] + d["gt"]["right"]
+        d["ratio"] = (d["generated"]["left"] + d["generated"]["right"]) / gt if gt > 0 else None
+        out["per_style"][str(style)] = d
+    return out
+
+
 # --------------------------------------------------------------------------------------------------------
 # 2. Zero-shot styles
 
@@ -432,23 +468,3 @@ def appropriateness(items, generated, *, seed: int = 0) -> dict:
     out["rule"] = "lower 95 % bound of (generated - MM) > 0 and of (generated - shuffled) > 0"
     out["sigma_s"] = 0.1
     return out
-
-
-# --------------------------------------------------------------------------------------------------------
-# 5. Real speech
-
-
-# --------------------------------------------------------------------------------------------------------
-# All together
-
-
-# --------------------------------------------------------------------------------------------------------
-# Report
-
-
-
-
-
-
-
-

@@ -18,7 +18,7 @@ from jaxgest import metrics
 from jaxgest.runtime.errors import DataError
 from jaxgest.zeggs.claims import (FAR_ABOVE_MM, REALISM_MAX, SPEECH_STYLES, STYLE_RATIO, SUBSTITUTES,
                                   ZERO_SHOT_RATIO, StyleClassifier, appropriateness, beat_align, claim_items,
-                                  clip_accuracy, interval, motion_beats, realism, style_embeddings,
+                                  clip_accuracy, hand_speeds, interval, motion_beats, realism, style_embeddings,
                                   style_portrayal, substitute_motion, zero_shot)
 
 
@@ -123,7 +123,8 @@ def evaluate_claims(model, train_clips, datasets, *, seed: int = 0, substitute: 
     portrayal = style_portrayal(classifier, items, motions, cache)
     out = {"source": substitute or "generated", "datasets": sorted({it.dataset for it in items}, key=str),
            "clips": len(items), "style_portrayal": portrayal, "realism": realism(items, motions, train_clips, cache),
-           "appropriateness": appropriateness(items, motions, seed=seed)}
+           "appropriateness": appropriateness(items, motions, seed=seed),
+           "hand_speeds": hand_speeds(items, motions)}
     if exclude_styles:
         emb = None
         if model is not None and substitute is None:
@@ -192,6 +193,16 @@ def markdown(result: dict) -> str:
             r = "" if p["ratio"] is None else f"{p['ratio']:.2f}"
             lines.append(f"| {s} | {p['generated']:.3f} | {p['gt']:.3f} | {p['mm']:.3f} | {r} | {top} |")
         lines.append("")
+        hs = c.get("hand_speeds")
+        if hs:  # diagnostic of criterion 1: damping and handedness
+            lines += [f"Hand speed generated / GT (diagnostic): {_ci(hs['ratio'])}; left hand's share of the speed: "
+                      + ", ".join(f"{k} {v:.2f}" for k, v in hs["left_share"].items()), "",
+                      "| style | hand speed L / R: generated | GT | example | generated / GT |", "|---|---:|---:|---:|---:|"]
+            for s, d in hs["per_style"].items():
+                r = "" if d["ratio"] is None else f"{d['ratio']:.2f}"
+                lines.append(f"| {s} | " + " | ".join(f"{d[k]['left']:.3g} / {d[k]['right']:.3g}"
+                                                    for k in ("generated", "gt", "example")) + f" | {r} |")
+            lines.append("")
         for s, z in (c.get("zero_shot") or {}).items():
             e = z.get("embedding")
             sep = "n/a" if not e or e["separation"] is None else f"{e['separation']:.2f}"

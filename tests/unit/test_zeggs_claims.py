@@ -90,6 +90,11 @@ def test_gt_holds_and_mm_fails(sets):
     assert not ap["holds"] and ap["generated_minus_mm"]["mean"] == 0.0
     md = claims_run.markdown({"claims": mm})
     assert "does not hold" in md and "| sad |" in md
+    # the hand-speed diagnostic: GT against itself is 1 in every style
+    hs = gt["hand_speeds"]
+    assert hs["ratio"]["mean"] == pytest.approx(1.0) and hs["left_share"]["generated"] == hs["left_share"]["gt"]
+    assert all(d["ratio"] == pytest.approx(1.0) for d in hs["per_style"].values())
+    assert "Hand speed generated / GT" in md
 
 
 def test_damped_motion_fails_realism_and_style(sets):
@@ -107,6 +112,28 @@ def test_damped_motion_fails_realism_and_style(sets):
     assert not r["realism"]["holds"] and r["realism"]["geometric_mean_ratio"] > 2.0
     assert not r["style_portrayal"]["holds"]
     assert not r["appropriateness"]["holds"] or r["appropriateness"]["clips_without_beats"] > 0
+    assert r["hand_speeds"]["ratio"]["mean"] < 0.01  # frozen: no hand moves
+
+
+def test_hand_speeds_measure_damping_and_handedness(sets):
+    train, held = sets
+    items = claims.claim_items(train, held)
+
+    def damped(it):  # played at half speed (each frame twice): the hands move half as fast
+        m = it.clip.motion
+        i = np.arange(m.num_frames) // 2
+        return m.replace(rotations=m.rotations[i], translations=m.translations[i])
+
+    hs = claims.hand_speeds(items, [damped(it) for it in items])
+    assert 0.4 < hs["ratio"]["mean"] < 0.6 and all(d["ratio"] < 0.7 for d in hs["per_style"].values())
+    swapped = claims.hand_speeds(items, [it.mm_style.motion for it in items])
+    left_handed = [s for s in hs["per_style"] if "left" in s]
+    if left_handed:  # real left-handed GT moves the left hand more than the right
+        d = hs["per_style"][left_handed[0]]["gt"]
+        assert d["left"] > d["right"]
+    assert swapped["left_share"]["gt"] == hs["left_share"]["gt"]
+    with pytest.raises(DataError):
+        claims.hand_speeds(items, [])
 
 
 def test_substitute_and_model_errors(sets):

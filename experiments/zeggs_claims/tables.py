@@ -18,6 +18,7 @@ OUT = HERE / "out"
 MAIN = [f"small_s{k}" for k in range(5)]
 ZERO_SHOT = [f"zs_{s}_s{k}" for s in ("sad", "tense") for k in range(2)]
 PILOTS = ["pilot", "pilot_zs_sad"]
+LEVER = [f"{r}_scale2" for r in MAIN + ZERO_SHOT]
 
 
 def load(run):
@@ -132,9 +133,8 @@ def tables() -> str:
         + speed_table(MAIN + ZERO_SHOT, "Table 1b. The cause measured for claim 1: hand speed (diagnostic, not a gate)")
         + zero_shot_table(ZERO_SHOT, "Table 2. Claim 2, zero-shot: 2 seeds per left-out style (`run.sh`)")
         + speech_table(MAIN, "Table 3. Claim 5, real speech (ZEGGS + BEAT2 WAVs), 2 styles (`run.sh`)")
-        + claims_table(PILOTS, "Pilot (not a result): `small`, 300 steps (`run.sh pilot pilot_zs_sad`)")
-        + zero_shot_table(PILOTS, "Pilot, zero-shot (not a result)")
-        + speech_table(PILOTS, "Pilot, real speech (not a result)"))
+        + claims_table(LEVER, "Table 4. Lever against damping: style embeddings x 2 (`--style-scale 2`), same models")
+        + speed_table(LEVER, "Table 4b. Hand speed under the lever"))
 
 
 def main():

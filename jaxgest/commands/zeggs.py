@@ -88,6 +88,9 @@ def register(subparsers) -> None:
     e.add_argument("--substitute", default=None, choices=SUBSTITUTES,
                    help="with --claims: replace the generated motion by real motion (a check of the evaluation: "
                    "gt must hold, mm-style fails style portrayal, mm-script fails appropriateness)")
+    e.add_argument("--style-scale", type=float, default=1.0, metavar="A",
+                   help="with --claims: generate with every style embedding times A (the paper's scaling of "
+                   "style embeddings; 1 = as trained)")
     e.set_defaults(func=_evaluate)
 
 
@@ -171,7 +174,8 @@ def _evaluate(args) -> int:
 
     out = check_output_path(args.json)
     claims_only = [flag for flag, on in (("--heldout", args.heldout), ("--heldout-seeds", args.heldout_seeds),
-                                         ("--speech", args.speech), ("--substitute", args.substitute)) if on]
+                                         ("--speech", args.speech), ("--substitute", args.substitute),
+                                         ("--style-scale", args.style_scale != 1.0)) if on]
     if args.claims:
         return _evaluate_claims(args, out)
     if claims_only:
@@ -216,7 +220,7 @@ def _evaluate_claims(args, out) -> int:
         raise JaxgestError(f"--speech-styles {args.speech_styles!r}: expected comma-separated style names")
     result, config = claims_run.run(args.workdir, args.data, heldout=args.heldout, heldout_seeds=args.heldout_seeds,
                                 speech=args.speech, speech_styles=styles, segment_s=args.segment_seconds,
-                                seed=args.seed, substitute=args.substitute)
+                                seed=args.seed, substitute=args.substitute, style_scale=args.style_scale)
     write_results(out, result, config)
     print(claims_run.markdown(result))
     return 0

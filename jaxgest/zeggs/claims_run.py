@@ -22,8 +22,9 @@ from jaxgest.zeggs.claims import (FAR_ABOVE_MM, REALISM_MAX, SPEECH_STYLES, STYL
                                   style_portrayal, substitute_motion, zero_shot)
 
 
-def generate_items(model, items, *, seed: int = 0, progress: bool = False) -> list:
-    """The model's motion for every item: its clip's speech in the style of its example."""
+def generate_items(model, items, *, seed: int = 0, progress: bool = False, style_scale: float = 1.0) -> list:
+    """The model's motion for every item: its clip's speech in the style of its example (its embedding times
+    ``style_scale``: the paper's scaling of style embeddings, ``weights=[style_scale]``)."""
     from tqdm.auto import tqdm
 
     from jaxgest.motion.datasets import load_clip_audio
@@ -31,7 +32,8 @@ def generate_items(model, items, *, seed: int = 0, progress: bool = False) -> li
     out = []
     for it in tqdm(items, desc="claims: generate", disable=not progress, leave=False):
         audio, sr = load_clip_audio(it.clip)
-        out.append(model.generate(audio, [it.example.motion], sr=sr, seed=seed, name=f"{it.clip.path.stem}_gen"))
+        out.append(model.generate(audio, [it.example.motion], weights=[style_scale], sr=sr, seed=seed,
+                                  name=f"{it.clip.path.stem}_gen"))
     return out
 
 
@@ -51,7 +53,8 @@ def speech_segments(path, segment_s: float) -> list[tuple]:
 
 
 def real_speech(model, wavs, train_clips, *, styles: Sequence[str] = SPEECH_STYLES, segment_s: float = 10.0,
-                seed: int = 0, classifier: StyleClassifier | None = None, progress: bool = False) -> dict:
+                seed: int = 0, classifier: StyleClassifier | None = None, progress: bool = False,
+                style_scale: float = 1.0) -> dict:
     """Criterion 5: gestures generated from real speech files in each of ``styles`` (the example: the first
     training clip of the style, by content), per ``segment_s``-second segment. Per style: BeatAlign of the
     generated motion against the segment's onsets, of MM (real training clips of the style, cycled, scored
@@ -76,7 +79,8 @@ def real_speech(model, wavs, train_clips, *, styles: Sequence[str] = SPEECH_STYL
         rows, motions = [], []
         for i, (w, y, sr, t0) in enumerate(tqdm(segments, desc=f"claims: speech ({style})", disable=not progress,
                                               leave=False)):
-            g = model.generate(y, [pool[0].motion], sr=sr, seed=seed, name=f"speech_{style}_{i}")
+            g = model.generate(y, [pool[0].motion], weights=[style_scale], sr=sr, seed=seed,
+                               name=f"speech_{style}_{i}")
             onsets = metrics.onset_times(y, sr)
             duration = len(y) / sr
             gb = motion_beats(g)
@@ -102,12 +106,12 @@ def real_speech(model, wavs, train_clips, *, styles: Sequence[str] = SPEECH_STYL
 
 def evaluate_claims(model, train_clips, datasets, *, seed: int = 0, substitute: str | None = None,
                     exclude_styles: Sequence[str] = (), progress: bool = False,
-                    generate: Callable | None = None) -> dict:
+                    generate: Callable | None = None, style_scale: float = 1.0) -> dict:
     """Criteria 1, 3 and 4 (and 2 for every style in ``exclude_styles``, the styles the model never saw)
     on held-out ``datasets`` (``(name, clips)`` pairs); ``train_clips``: the real training-script clips
     (classifier, examples, MM). ``substitute`` (:data:`SUBSTITUTES`) replaces the generated motion by real
     motion (a check of the evaluation; ``model`` may then be None); ``generate(items) -> motions``
-    replaces the model's generation (tests)."""
+    replaces the model's generation (tests); ``style_scale`` scales the example's style embedding."""
     train_clips = list(train_clips)
     items = claim_items(train_clips, datasets)
     if substitute is not None:
@@ -117,7 +121,7 @@ def evaluate_claims(model, train_clips, datasets, *, seed: int = 0, substitute: 
     else:
         if model is None:
             raise DataError("claims: no model and no substitute")
-        motions = generate_items(model, items, seed=seed, progress=progress)
+        motions = generate_items(model, items, seed=seed, progress=progress, style_scale=style_scale)
     cache = {}  # motion features, computed once per motion within this evaluation
     classifier = StyleClassifier.fit(train_clips, cache)
     portrayal = style_portrayal(classifier, items, motions, cache)
@@ -227,11 +231,12 @@ def markdown(result: dict) -> str:
 
 
 def run(workdir, data_dir, *, heldout=(), heldout_seeds: int = 0, speech=(), speech_styles=SPEECH_STYLES,
-        segment_s: float = 10.0, seed: int = 0, substitute: str | None = None, progress: bool = True) -> tuple:
+        segment_s: float = 10.0, seed: int = 0, substitute: str | None = None, progress: bool = True,
+        style_scale: float = 1.0) -> tuple:
     """``jaxgest zeggs evaluate --claims``: the trained model of ``workdir``, its training-script clips
     ``data_dir`` (the classifier, examples, MM), held-out folders ``heldout`` and synthetic seeds
     1..``heldout_seeds`` (criteria 1, 3, 4 and 2 for the model's ``exclude_styles``), and speech files
-    ``speech`` (criterion 5). Returns ``(result, config)``: the results and the resolved settings for the
+    ``speech`` (criterion 5); ``style_scale``: every style embedding scaled by it (1: as trained). Returns ``(result, config)``: the results and the resolved settings for the
     stamp (:func:`jaxgest.runtime.provenance.write_results`)."""
     import tempfile
 
@@ -242,6 +247,8 @@ def run(workdir, data_dir, *, heldout=(), heldout_seeds: int = 0, speech=(), spe
         raise DataError("--claims needs held-out data (--heldout DIR... or --heldout-seeds N) or --speech WAV...")
     if substitute is not None and substitute not in SUBSTITUTES:
         raise DataError(f"--substitute {substitute!r}: choose from {', '.join(SUBSTITUTES)}")
+    if not (np.isfinite(style_scale) and style_scale > 0):
+        raise DataError(f"--style-scale must be finite and > 0, got {style_scale}")
     if not segment_s > 0:
         raise DataError(f"--segment-seconds must be > 0, got {segment_s}")
     for w in speech:
@@ -267,15 +274,15 @@ def run(workdir, data_dir, *, heldout=(), heldout_seeds: int = 0, speech=(), spe
         with tempfile.TemporaryDirectory(prefix="jaxgest-claims-") as tmp:
             sets = heldout_datasets(heldout, heldout_seeds, tmp_dir=tmp, progress=progress)
             result["claims"] = evaluate_claims(model, train, sets, seed=seed, substitute=substitute,
-                                               exclude_styles=excluded, progress=progress)
+                                               exclude_styles=excluded, progress=progress, style_scale=style_scale)
     if speech:
         result["real_speech"] = real_speech(model, speech, train, styles=speech_styles, segment_s=segment_s,
-                                            seed=seed, progress=progress)
+                                            seed=seed, progress=progress, style_scale=style_scale)
     config = {"model": model.cfg.to_dict(), "workdir": str(workdir), "checkpoint_step": int(model.step),
               "training_seed": model.meta.get("seed"), "training_data": str(data_dir),
               "heldout": [str(d) for d in heldout], "heldout_seeds": heldout_seeds,
               "speech": [str(w) for w in speech], "speech_styles": list(speech_styles), "segment_s": segment_s,
-              "seed": seed, "substitute": substitute, "exclude_styles": list(excluded),
+              "seed": seed, "substitute": substitute, "exclude_styles": list(excluded), "style_scale": style_scale,
               "thresholds": {"style_ratio": STYLE_RATIO, "far_above_mm": FAR_ABOVE_MM,
                              "zero_shot_ratio": ZERO_SHOT_RATIO, "realism_max": REALISM_MAX}}
     return result, config

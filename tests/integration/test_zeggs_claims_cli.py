@@ -57,6 +57,8 @@ def test_claims_cli_gt_substitute_holds(zeggs_workdir, claim_data, tmp_path, cap
     (["--claims", "--speech", "MISSING.wav"], "MISSING.wav: no such speech file"),
     (["--claims", "--heldout", "H", "--probe-seeds", "2"], "--probe-seeds: not with --claims"),
     (["--claims", "--heldout-seeds", "-1"], "--heldout-seeds must be >= 0"),
+    (["--style-scale", "2"], "--style-scale: only with --claims"),
+    (["--claims", "--heldout", "H", "--style-scale", "0"], "--style-scale must be finite and > 0"),
     (["--claims", "--speech", "WAV", "--speech-styles", "sad,happy"], "no training clip of the --speech-styles happy"),
 ])
 def test_claims_cli_bad_input(zeggs_workdir, claim_data, tmp_path, capsys, extra, message):

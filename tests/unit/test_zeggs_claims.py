@@ -144,6 +144,24 @@ def test_substitute_and_model_errors(sets):
         claims_run.evaluate_claims(None, train, held)
 
 
+def test_style_scale_reaches_the_generator(sets, monkeypatch):
+    """--style-scale A generates with the example's embedding times A (blend weights [A], unnormalised)."""
+    train, held = sets
+    items = claims.claim_items(train, held)[:2]
+    calls = []
+
+    class Fake:
+        def generate(self, audio, styles, *, weights=None, sr=None, seed=0, name=None):
+            calls.append((len(styles), list(weights)))
+            return styles[0]
+
+    monkeypatch.setattr("jaxgest.motion.datasets.load_clip_audio", lambda clip: (np.zeros(160), 16000))
+    out = claims_run.generate_items(Fake(), items, style_scale=1.5)
+    assert len(out) == 2 and calls == [(1, [1.5]), (1, [1.5])]
+    with pytest.raises(DataError, match="--style-scale"):
+        claims_run.run("nowhere", "nowhere", heldout_seeds=1, style_scale=0.0)
+
+
 def test_speech_segments(tmp_path):
     import soundfile as sf
 

@@ -1,0 +1,49 @@
+"""The README tables of the two run.sh experiments (zeggs_claims, tgst_bandai2) match their stamped results.
+
+Each experiment's ``tables.py`` builds the tables from its results files; the README holds them between markers.
+"""
+
+import importlib.util
+import pathlib
+import re
+
+import pytest
+
+EXPERIMENTS = pathlib.Path(__file__).resolve().parents[2] / "experiments"
+CASES = {"zeggs_claims": (r"<!-- tables:start -->\n(.*)\n<!-- tables:end -->", "tables"),
+         "tgst_bandai2": (r"<!-- tables -->\n(.*)\n<!-- /tables -->", "build")}
+
+
+def _module(name):
+    spec = importlib.util.spec_from_file_location(f"_tables_{name}", EXPERIMENTS / name / "tables.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_readme_tables_match_results(name):
+    pattern, fn = CASES[name]
+    m = re.search(pattern, (EXPERIMENTS / name / "README.md").read_text(), flags=re.S)
+    assert m, f"{name}/README.md: no table markers"
+    assert getattr(_module(name), fn)().strip() == m.group(1).strip(), \
+        f"experiments/{name}/README.md differs from its results: run experiments/{name}/tables.py"
+
+
+def test_a_changed_claims_result_is_caught(monkeypatch):
+    """Control: one number of one results file changed -> the generated tables differ."""
+    mod = _module("zeggs_claims")
+    real = mod.load
+    docs = [r for r in mod.MAIN if real(r)]
+    if not docs:
+        pytest.skip("no zeggs_claims results file")
+    before = mod.tables()
+
+    def changed(run):
+        d = real(run)
+        if d and run == docs[0]:
+            d["results"]["claims"]["style_portrayal"]["generated"]["mean"] += 0.1
+        return d
+
+    monkeypatch.setattr(mod, "load", changed)
+    assert mod.tables() != before

@@ -47,3 +47,12 @@ def test_a_changed_claims_result_is_caught(monkeypatch):
 
     monkeypatch.setattr(mod, "load", changed)
     assert mod.tables() != before
+
+
+def test_verdict_rule_decides_only_when_the_remaining_runs_cannot_change_it():
+    verdict = _module("zeggs_claims").verdict
+    assert verdict(4, 4).startswith("**holds**") and verdict(4, 5).startswith("**holds**")
+    assert verdict(0, 2).startswith("**does not hold**") and verdict(3, 5).startswith("**does not hold**")
+    assert verdict(1, 2).startswith("open") and verdict(0, 1).startswith("open") and verdict(3, 4).startswith("open")
+    assert verdict(0, 1, 2, 2).startswith("**does not hold**") and verdict(1, 1, 2, 2).startswith("open")
+    assert verdict(2, 2, 2, 2).startswith("**holds**")

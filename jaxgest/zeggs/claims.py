@@ -292,10 +292,14 @@ def hand_speeds(items, generated) -> dict:
     if len(generated) != len(items):
         raise DataError(f"hand speeds: {len(generated)} motions for {len(items)} items")
 
+    seen = {}  # id -> (motion, speeds): an example serves many items, its FK runs once
+
     def lr(motion):
-        pos = kinematics.forward_kinematics(motion)
-        idx = body.joint_indices(motion.skeleton, body.HANDS)  # (Hand_L, Hand_R)
-        return [float(metrics.hand_speed(pos, motion.fps, [i]).mean()) for i in idx]
+        if id(motion) not in seen:
+            pos = kinematics.forward_kinematics(motion)
+            idx = body.joint_indices(motion.skeleton, body.HANDS)  # (Hand_L, Hand_R)
+            seen[id(motion)] = (motion, [float(metrics.hand_speed(pos, motion.fps, [i]).mean()) for i in idx])
+        return seen[id(motion)][1]
 
     rows = [{"generated": lr(g), "gt": lr(it.clip.motion), "example": lr(it.example.motion)}
             for it, g in zip(items, generated)]

@@ -31,11 +31,13 @@ def _embeddings(x, name: str) -> np.ndarray:
     return x
 
 
-def linear_probe_predict(train_emb, train_labels: Sequence, test_emb, *, l2: float = 1e-3) -> list:
+def linear_probe_predict(train_emb, train_labels: Sequence, test_emb, *, l2: float = 1e-3, std_floor=1e-8) -> list:
     """Labels predicted for ``test_emb`` by a closed-form ridge classifier fitted on (train_emb, train_labels).
 
     train_emb: (N, D), test_emb: (T, D); labels: any hashables (style names), length N. Features are
-    standardised with the training mean / std (std floored at 1e-8); the classifier is the ridge regression
+    standardised with the training mean / std, the std floored at ``std_floor`` (a number or one per feature
+    (D,): a feature that is constant in training up to rounding must not turn a small test deviation into
+    thousands of units, :func:`jaxgest.zeggs.claims.group_std_floor`); the classifier is the ridge regression
     to one-hot targets W = (X^T X + l2 * N * I)^-1 X^T Y with an unpenalised bias (centred X, Y); the
     prediction is argmax over the training classes (ties -> the first in sorted label order). Deterministic;
     no iterative training. One fit predicts any number of test rows (:func:`linear_probe_accuracy` scores them).
@@ -56,7 +58,10 @@ def linear_probe_predict(train_emb, train_labels: Sequence, test_emb, *, l2: flo
     index = {c: k for k, c in enumerate(classes)}
     onehot = np.zeros((len(ytr), len(classes)))
     onehot[np.arange(len(ytr)), [index[c] for c in ytr]] = 1.0
-    mu, sd = xtr.mean(axis=0), np.maximum(xtr.std(axis=0), 1e-8)
+    floor = np.broadcast_to(np.asarray(std_floor, np.float64), xtr.shape[1:])
+    if not np.all(floor > 0):
+        raise DataError("linear_probe: std_floor must be > 0")
+    mu, sd = xtr.mean(axis=0), np.maximum(xtr.std(axis=0), floor)
     xs, ts = (xtr - mu) / sd, (xte - mu) / sd
     ymu = onehot.mean(axis=0)
     gram = xs.T @ xs + l2 * len(xs) * np.eye(xs.shape[1])
@@ -65,7 +70,7 @@ def linear_probe_predict(train_emb, train_labels: Sequence, test_emb, *, l2: flo
 
 
 def linear_probe_accuracy(
-    train_emb, train_labels: Sequence, test_emb, test_labels: Sequence, *, l2: float = 1e-3
+    train_emb, train_labels: Sequence, test_emb, test_labels: Sequence, *, l2: float = 1e-3, std_floor=1e-8
 ) -> float:
     """Accuracy of the closed-form ridge classifier of :func:`linear_probe_predict` fitted on
     (train_emb, train_labels), on the test set (test_emb, test_labels; lengths T). Test labels unseen in
@@ -74,7 +79,7 @@ def linear_probe_accuracy(
     References: linear evaluation protocol of representation learning (e.g. Alain & Bengio 2016, linear
     probes); applied to ZeroEGGS style embeddings (Ghorbani et al. 2023, §5.2) per docs/design.md §5.
     """
-    pred = linear_probe_predict(train_emb, train_labels, test_emb, l2=l2)
+    pred = linear_probe_predict(train_emb, train_labels, test_emb, l2=l2, std_floor=std_floor)
     yte = list(test_labels)
     if len(yte) != len(pred):
         raise DataError("linear_probe_accuracy: number of labels differs from number of embeddings")

@@ -16,7 +16,7 @@ import numpy as np
 
 from jaxgest import metrics
 from jaxgest.runtime.errors import DataError
-from jaxgest.zeggs.claims import (FAR_ABOVE_MM, REALISM_MAX, SPEECH_STYLES, STYLE_RATIO, SUBSTITUTES,
+from jaxgest.zeggs.claims import (FAR_ABOVE_MM, REALISM_MAX, SPEECH_STYLES, STD_FLOOR_FRACTION, STYLE_RATIO, SUBSTITUTES,
                                   ZERO_SHOT_RATIO, StyleClassifier, appropriateness, beat_align, claim_items,
                                   clip_accuracy, hand_speeds, interval, motion_beats, realism, style_embeddings,
                                   style_portrayal, substitute_motion, zero_shot)
@@ -284,5 +284,6 @@ def run(workdir, data_dir, *, heldout=(), heldout_seeds: int = 0, speech=(), spe
               "speech": [str(w) for w in speech], "speech_styles": list(speech_styles), "segment_s": segment_s,
               "seed": seed, "substitute": substitute, "exclude_styles": list(excluded), "style_scale": style_scale,
               "thresholds": {"style_ratio": STYLE_RATIO, "far_above_mm": FAR_ABOVE_MM,
-                             "zero_shot_ratio": ZERO_SHOT_RATIO, "realism_max": REALISM_MAX}}
+                             "zero_shot_ratio": ZERO_SHOT_RATIO, "realism_max": REALISM_MAX,
+                             "classifier_std_floor_fraction": STD_FLOOR_FRACTION}}
     return result, config

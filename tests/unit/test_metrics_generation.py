@@ -16,6 +16,7 @@ from jaxgest.metrics import (
     hand_speed,
     kinematic_beats,
     linear_probe_accuracy,
+    linear_probe_predict,
     onset_times,
     shuffled_beat_alignment,
 )
@@ -163,3 +164,19 @@ def test_frechet_distance_properties():
         frechet_distance(a[:1], a)
     with pytest.raises(DataError):
         frechet_distance(a, a[:, :3])
+
+
+def test_linear_probe_std_floor():
+    """A feature constant in training up to rounding (std 1e-9) decides every test row unless its std is floored."""
+    rng = np.random.default_rng(15)
+    lab = ["a", "b"] * 20
+    xtr = np.stack([np.array([0.0 if c == "a" else 3.0 for c in lab]) + rng.normal(0, 0.3, 40),
+                    1.0 + rng.normal(0, 1e-9, 40)], axis=1)
+    xte = xtr + [0.0, 1e-3]  # a 1e-3 shift in the near-constant feature: a million of its training stds
+    assert linear_probe_accuracy(xtr, lab, xtr, lab) == 1.0
+    assert linear_probe_accuracy(xte[:, :1], lab, xte[:, :1], lab) == 1.0
+    assert linear_probe_accuracy(xtr, lab, xte, lab) == 0.5  # every row to one class
+    assert linear_probe_predict(xtr, lab, xte) == linear_probe_predict(xtr, lab, xte, std_floor=[1e-8, 1e-8])
+    assert linear_probe_accuracy(xtr, lab, xte, lab, std_floor=[1e-8, 0.1]) == 1.0
+    with pytest.raises(DataError, match="std_floor"):
+        linear_probe_predict(xtr, lab, xte, std_floor=0.0)

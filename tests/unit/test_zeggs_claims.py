@@ -13,13 +13,13 @@ from jaxgest.zeggs import claims, claims_run
 
 @pytest.fixture(scope="module")
 def sets(tmp_path_factory):
-    """Training scripts (synth seed 0) and one held-out script set (seed 1): 2 contents x 7 styles x 4 s."""
+    """Training scripts (synth seed 0) and one held-out script set (seed 1): 2 contents x 7 styles x 6 s."""
     from jaxgest.motion.datasets import load_folder
     from jaxgest.motion.synthetic import write_dataset
 
     root = tmp_path_factory.mktemp("claims")
-    write_dataset(root / "train", clips=14, seconds=4, seed=0, progress=False)
-    write_dataset(root / "held", clips=14, seconds=4, seed=1, progress=False)
+    write_dataset(root / "train", clips=14, seconds=6, seed=0, progress=False)
+    write_dataset(root / "held", clips=14, seconds=6, seed=1, progress=False)
     return load_folder(root / "train"), [("held", load_folder(root / "held"))]
 
 
@@ -95,6 +95,37 @@ def test_gt_holds_and_mm_fails(sets):
     assert hs["ratio"]["mean"] == pytest.approx(1.0) and hs["left_share"]["generated"] == hs["left_share"]["gt"]
     assert all(d["ratio"] == pytest.approx(1.0) for d in hs["per_style"].values())
     assert "Hand speed generated / GT" in md
+
+
+def test_classifier_is_not_decided_by_rounding_noise_channels(sets):
+    """Planted feet are constant in the real clips up to rounding (std ~1e-8): a 1 mm jitter of the feet must
+    not decide the style (it did with the std floored at 1e-8: every window went to one style)."""
+    from jaxgest.motion import body
+
+    train, held = sets
+    items = claims.claim_items(train, held)
+    rng = np.random.default_rng(0)
+
+    def jittered(m):
+        t = m.translations.copy()
+        feet = body.joint_indices(m.skeleton, ("Foot_L", "Foot_R"))
+        t[:, feet] += rng.normal(0.0, 0.1, (m.num_frames, len(feet), 3))  # 1 mm in file units (cm)
+        return m.replace(translations=t)
+
+    motions = [jittered(it.clip.motion) for it in items]
+
+    def accuracy(clf, ms):
+        return np.mean([claims.clip_accuracy(p, it.clip.style) for p, it in zip(clf.predict(ms), items)])
+
+    floored, raw = claims.StyleClassifier.fit(train), claims.StyleClassifier.fit(train, floor_fraction=1e-12)
+    gt = accuracy(floored, [it.clip.motion for it in items])
+    assert gt > 0.6 and accuracy(raw, [it.clip.motion for it in items]) == pytest.approx(gt, abs=0.1)
+    assert accuracy(floored, motions) > gt - 0.1  # the jitter changes nothing that matters
+    assert accuracy(raw, motions) < 0.5 * gt  # the defect the floor removes
+    floor = claims.group_std_floor(floored.features)
+    assert floor.shape == floored.features.shape[1:] and np.all(floor > 0)
+    with pytest.raises(DataError, match="groups"):
+        claims.group_std_floor(np.zeros((3, 10)))
 
 
 def test_damped_motion_fails_realism_and_style(sets):

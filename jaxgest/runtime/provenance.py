@@ -21,6 +21,9 @@ from jaxgest.runtime.errors import DataError
 from jaxgest.runtime.io import write_json_atomic
 
 STAMP_KEYS = ("commit", "dirty", "version", "config", "command")
+#: where experiments keep their stamped results (git pathspec globs from the checkout's top): not code, so a
+#: rewritten results file does not make a stamp dirty
+RESULTS_PATHS = ("experiments/*/out/**", "experiments/*/results/**")
 
 
 def _git(args, cwd) -> str | None:
@@ -34,14 +37,18 @@ def _git(args, cwd) -> str | None:
 def commit_of(path=None) -> tuple[str | None, bool | None]:
     """(commit hash, working tree dirty?) of the git checkout holding ``path`` (default: this package).
 
-    ``(None, None)`` outside a checkout (an installed package): the stamp then says so instead of guessing.
+    Dirty means a tracked file differs from the commit, other than the results files themselves
+    (:data:`RESULTS_PATHS`): an evaluation that rewrites a committed results file, or runs beside one that
+    does, is still the commit's code. ``(None, None)`` outside a checkout (an installed package): the stamp
+    then says so instead of guessing.
     """
     where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
     where = where if where.is_dir() else where.parent
     head = _git(["rev-parse", "HEAD"], where)
     if head is None:
         return None, None
-    status = _git(["status", "--porcelain", "--untracked-files=no"], where)
+    status = _git(["status", "--porcelain", "--untracked-files=no", "--", ":(top)",
+                   *(f":(top,glob,exclude){p}" for p in RESULTS_PATHS)], where)
     return head, bool(status)
 
 

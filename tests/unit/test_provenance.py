@@ -26,6 +26,33 @@ def test_commit_inside_this_checkout():
     assert len(commit) == 40 and isinstance(dirty, bool)
 
 
+def test_dirty_means_code_not_results(tmp_path):
+    import shutil
+    import subprocess
+
+    if shutil.which("git") is None:
+        pytest.skip("no git")
+
+    def git(*args):
+        subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True,
+                       capture_output=True)
+
+    files = {"pkg/code.py": "x = 1\n", "experiments/e/out/claims_a.md": "a\n", "experiments/e/results/r.json": "{}\n"}
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-q", "-m", "init")
+    assert provenance.commit_of(tmp_path / "pkg")[1] is False
+    (tmp_path / "experiments/e/out/claims_a.md").write_text("rewritten by an evaluation\n")
+    (tmp_path / "experiments/e/results/r.json").write_text("[]\n")
+    (tmp_path / "experiments/e/out/new.json").write_text("{}\n")  # untracked: never counted
+    assert provenance.commit_of(tmp_path / "pkg")[1] is False
+    (tmp_path / "pkg/code.py").write_text("x = 2\n")
+    assert provenance.commit_of(tmp_path / "experiments/e")[1] is True
+
+
 @pytest.mark.parametrize("content", ["{", json.dumps({"results": {}}), json.dumps({"stamp": {"commit": "x"}, "results": {}})])
 def test_unstamped_file_refused(tmp_path, content):
     p = tmp_path / "bad.json"

@@ -56,3 +56,11 @@ def test_verdict_rule_decides_only_when_the_remaining_runs_cannot_change_it():
     assert verdict(1, 2).startswith("open") and verdict(0, 1).startswith("open") and verdict(3, 4).startswith("open")
     assert verdict(0, 1, 2, 2).startswith("**does not hold**") and verdict(1, 1, 2, 2).startswith("open")
     assert verdict(2, 2, 2, 2).startswith("**holds**")
+
+
+def test_results_before_the_judge_correction_are_not_counted():
+    mod = _module("zeggs_claims")
+    stamp = {"config": {"thresholds": {"style_ratio": 0.9}}}
+    assert not mod.judge_corrected({"stamp": stamp})
+    stamp["config"]["thresholds"]["classifier_std_floor_fraction"] = 0.01
+    assert mod.judge_corrected({"stamp": stamp})

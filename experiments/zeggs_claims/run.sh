@@ -5,6 +5,7 @@
 # held-out script datasets and the real speech -> out/claims_RUN.json (stamped) and out/claims_RUN.md.
 # Data (written once): out/data = jaxgest synth --seed 0 (training scripts), out/heldout/seedK, K = 1..8.
 # Environment: PYTHON (default python), HELDOUT (default 8), SHARED (default: ../shared beside the repo),
+# LEVER (default "small_s1 zs_tense_s0 zs_sad_s0"): runs also evaluated with --style-scale 2 (the lever);
 # JOBS (default 1): with JOBS=N the runs are dealt round-robin to N queues, each pinned to one core (taskset) with
 # XLA's intra-op threads at 1 -- more runs per hour than one run on all cores (docs/benchmarks.md).
 set -euo pipefail
@@ -22,7 +23,7 @@ for k in $(seq 1 "$HELDOUT"); do
 done
 speech=(); for w in "$SPEECH_DIR"/zeggs/*.wav "$SPEECH_DIR"/beat2/*.wav; do [ -f "$w" ] && speech+=("$w"); done
 runs=("$@"); [ ${#runs[@]} -gt 0 ] || mapfile -t runs < <(grep -v '^#' "$HERE/runs.tsv" | cut -f1 | grep -v '^pilot')
-JOBS="${JOBS:-1}"
+JOBS="${JOBS:-1}"; LEVER="${LEVER-small_s1 zs_tense_s0 zs_sad_s0}"
 one_run() {
   local run="$1" line name preset steps seed exclude s t
   line=$(grep -P "^$run\t" "$HERE/runs.tsv") || { echo "run.sh: no run $run in runs.tsv" >&2; exit 2; }
@@ -36,6 +37,11 @@ one_run() {
   "${J[@]}" zeggs evaluate --workdir "$OUT/$name" --data "$OUT/data" --claims --heldout "${held[@]}" "${sp[@]}" \
       --json "$OUT/claims_$name.json" > "$OUT/claims_$name.md"
   echo "$name: evaluated in $(( $(date +%s) - t )) s"
+  if [[ " $LEVER " == *" $name "* ]]; then  # the lever (README): the same model, style embeddings x 2
+    "${J[@]}" zeggs evaluate --workdir "$OUT/$name" --data "$OUT/data" --claims --heldout "${held[@]}" \
+        --style-scale 2 --json "$OUT/claims_${name}_scale2.json" > "$OUT/claims_${name}_scale2.md"
+    echo "$name: lever (--style-scale 2) evaluated"
+  fi
 }
 for run in "${runs[@]}"; do grep -qP "^$run\t" "$HERE/runs.tsv" || { echo "run.sh: no run $run in runs.tsv" >&2; exit 2; }; done
 if [ "$JOBS" -le 1 ]; then

@@ -30,6 +30,12 @@ def test_readme_tables_match_results(name):
         f"experiments/{name}/README.md differs from its results: run experiments/{name}/tables.py"
 
 
+def test_zeggs_claims_detail_tables_match_results():
+    path = EXPERIMENTS / "zeggs_claims" / "TABLES.md"
+    assert path.read_text() == _module("zeggs_claims").detail_tables(), \
+        "experiments/zeggs_claims/TABLES.md differs from its results: run experiments/zeggs_claims/tables.py"
+
+
 def test_a_changed_claims_result_is_caught(monkeypatch):
     """Control: one number of one results file changed -> the generated tables differ."""
     mod = _module("zeggs_claims")

@@ -28,18 +28,20 @@ def judge_corrected(doc) -> bool:
     return "classifier_std_floor_fraction" in (doc["stamp"]["config"].get("thresholds") or {})
 
 
-def load(run):
+def _read(run):
     p = OUT / f"claims_{run}.json"
-    if not p.is_file():
-        return None
-    doc = read_results(p)
-    return doc if judge_corrected(doc) else None
+    return read_results(p) if p.is_file() else None
+
+
+def load(run):
+    """The results of ``run`` when they were evaluated with the corrected judge (else None)."""
+    doc = _read(run)
+    return doc if doc and judge_corrected(doc) else None
 
 
 def stale_runs() -> list:
     """Runs whose results file predates the judge's correction (re-evaluate them: run.sh RUN)."""
-    return [r for r in MAIN + ZERO_SHOT + LEVER
-            if (OUT / f"claims_{r}.json").is_file() and not judge_corrected(read_results(OUT / f"claims_{r}.json"))]
+    return [r for r in MAIN + ZERO_SHOT + LEVER if (d := _read(r)) and not judge_corrected(d)]
 
 
 def ci(s) -> str:

@@ -37,7 +37,7 @@ def linear_probe_predict(train_emb, train_labels: Sequence, test_emb, *, l2: flo
     train_emb: (N, D), test_emb: (T, D); labels: any hashables (style names), length N. Features are
     standardised with the training mean / std, the std floored at ``std_floor`` (a number or one per feature
     (D,): a feature that is constant in training up to rounding must not turn a small test deviation into
-    thousands of units, :func:`jaxgest.zeggs.claims.group_std_floor`); the classifier is the ridge regression
+    thousands of units, :func:`jaxgest.zeggs.style_judge.group_std_floor`); the classifier is the ridge regression
     to one-hot targets W = (X^T X + l2 * N * I)^-1 X^T Y with an unpenalised bias (centred X, Y); the
     prediction is argmax over the training classes (ties -> the first in sorted label order). Deterministic;
     no iterative training. One fit predicts any number of test rows (:func:`linear_probe_accuracy` scores them).

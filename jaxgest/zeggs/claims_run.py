@@ -16,10 +16,11 @@ import numpy as np
 
 from jaxgest import metrics
 from jaxgest.runtime.errors import DataError
-from jaxgest.zeggs.claims import (FAR_ABOVE_MM, REALISM_MAX, SPEECH_STYLES, STD_FLOOR_FRACTION, STYLE_RATIO, SUBSTITUTES,
-                                  ZERO_SHOT_RATIO, StyleClassifier, appropriateness, beat_align, claim_items,
+from jaxgest.zeggs.claims import (FAR_ABOVE_MM, REALISM_MAX, SPEECH_STYLES, STYLE_RATIO, SUBSTITUTES,
+                                  ZERO_SHOT_RATIO, appropriateness, beat_align, claim_items,
                                   clip_accuracy, hand_speeds, interval, motion_beats, realism, style_embeddings,
                                   style_portrayal, substitute_motion, zero_shot)
+from jaxgest.zeggs.style_judge import STD_FLOOR_FRACTION, StyleClassifier
 
 
 def generate_items(model, items, *, seed: int = 0, progress: bool = False, style_scale: float = 1.0) -> list:

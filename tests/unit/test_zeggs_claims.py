@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jaxgest.runtime.errors import DataError
-from jaxgest.zeggs import claims, claims_run
+from jaxgest.zeggs import claims, claims_run, style_judge
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +57,7 @@ def test_zero_shot_rule():
 def test_window_statistics_shape(sets):
     train, _ = sets
     m = train[0].motion
-    w = claims.window_statistics(m)
+    w = style_judge.window_statistics(m)
     assert w.shape == (1 + int((m.num_frames - 2 * m.fps) // (0.5 * m.fps)), 12 * m.skeleton.num_joints)
 
 
@@ -117,15 +117,15 @@ def test_classifier_is_not_decided_by_rounding_noise_channels(sets):
     def accuracy(clf, ms):
         return np.mean([claims.clip_accuracy(p, it.clip.style) for p, it in zip(clf.predict(ms), items)])
 
-    floored, raw = claims.StyleClassifier.fit(train), claims.StyleClassifier.fit(train, floor_fraction=1e-12)
+    floored, raw = style_judge.StyleClassifier.fit(train), style_judge.StyleClassifier.fit(train, floor_fraction=1e-12)
     gt = accuracy(floored, [it.clip.motion for it in items])
     assert gt > 0.6 and accuracy(raw, [it.clip.motion for it in items]) == pytest.approx(gt, abs=0.1)
     assert accuracy(floored, motions) > gt - 0.1  # the jitter changes nothing that matters
     assert accuracy(raw, motions) < 0.5 * gt  # the defect the floor removes
-    floor = claims.group_std_floor(floored.features)
+    floor = style_judge.group_std_floor(floored.features)
     assert floor.shape == floored.features.shape[1:] and np.all(floor > 0)
     with pytest.raises(DataError, match="groups"):
-        claims.group_std_floor(np.zeros((3, 10)))
+        style_judge.group_std_floor(np.zeros((3, 10)))
 
 
 def test_damped_motion_fails_realism_and_style(sets):

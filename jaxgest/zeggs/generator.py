@@ -27,6 +27,7 @@ Cho et al. 2014 (GRU).
 
 from __future__ import annotations
 
+import functools
 from typing import Any, Optional
 
 import chex
@@ -49,7 +50,9 @@ class Dense(nn.Module):
     features: int
 
     @nn.compact
-    def __call__(self, x: jax.Array) -> jax.Array:
+    def __call__(self, x: jax.Array, record: Optional[dict] = None) -> jax.Array:
+        """``x @ kernel + bias``; with ``record`` (a dict, :func:`decoder_hoisted` only) the layer also adds
+        ``record["perturb"][name]`` to its output and stores its input in ``record["inputs"][name]``."""
         shape = (x.shape[-1], self.features)
         stored = self.get_variable("params", "kernel") if self.has_variable("params", "kernel") else None
         if isinstance(stored, QuantKernel):
@@ -61,7 +64,12 @@ class Dense(nn.Module):
         bias = self.param("bias", nn.initializers.zeros_init(), (self.features,), jnp.float32)
         if self.is_mutable_collection("calibration"):  # model.calibrate: the mean input of every layer
             self.sow("calibration", "input_mean", jnp.mean(x.reshape(-1, x.shape[-1]), axis=0))
-        return dense_apply(x, kernel, bias)
+        y = dense_apply(x, kernel, bias)
+        if record is not None:
+            key = "/".join(self.scope.path[-2:]) if self.name in ("input", "hidden") else self.name
+            record["inputs"][key] = x
+            y = y + record["perturb"][key]
+        return y
 
 
 class GRULayer(nn.Module):
@@ -73,10 +81,10 @@ class GRULayer(nn.Module):
     features: int
 
     @nn.compact
-    def __call__(self, h: jax.Array, x: jax.Array) -> jax.Array:
+    def __call__(self, h: jax.Array, x: jax.Array, record: Optional[dict] = None) -> jax.Array:
         H = self.features
-        gi = Dense(3 * H, name="input")(x)
-        gh = Dense(3 * H, name="hidden")(h)
+        gi = Dense(3 * H, name="input")(x, record)
+        gh = Dense(3 * H, name="hidden")(h, record)
         r = nn.sigmoid(gi[:, :H] + gh[:, :H])
         z = nn.sigmoid(gi[:, H:2 * H] + gh[:, H:2 * H])
         n = jnp.tanh(gi[:, 2 * H:] + r * gh[:, 2 * H:])
@@ -163,23 +171,26 @@ class RecurrentDecoder(nn.RNNCellBase):
     """
 
     cfg: ModelConfig
+    record: bool = False  # inputs carry per-layer output perturbations, outputs every layer's input (decoder_hoisted)
 
     @nn.compact
-    def __call__(self, carry: Carry, inputs: tuple[jax.Array, jax.Array], consts: tuple[jax.Array, ...]):
+    def __call__(self, carry: Carry, inputs: tuple, consts: tuple[jax.Array, ...]):
         cfg = self.cfg
         hidden, pose, root_pos, root_rot = carry
-        speech_t, style_t = inputs
+        speech_t, style_t = inputs[:2]
+        rec = {"perturb": inputs[2], "inputs": {}} if self.record else None
         facing, pose_mean, pose_std, in_scale = consts
         x = jnp.concatenate([pose * in_scale[None], local_facing(facing, root_rot), speech_t, style_t], axis=-1)
-        h = nn.elu(Dense(cfg.gru_hidden, name="input_layer")(x))
+        h = nn.elu(Dense(cfg.gru_hidden, name="input_layer")(x, rec))
         h = jnp.concatenate([h, x], axis=-1)
         new_hidden = []
         for i in range(cfg.gru_layers):
-            h = GRULayer(cfg.gru_hidden, name=f"gru{i}")(hidden[i], h)
+            h = GRULayer(cfg.gru_hidden, name=f"gru{i}")(hidden[i], h, rec)
             new_hidden.append(h)
-        y = Dense(cfg.pose_dim, name="output_layer")(h)
+        y = Dense(cfg.pose_dim, name="output_layer")(h, rec)
         pos, rot = update_character_state(y, root_pos, root_rot, cfg=cfg, pose_mean=pose_mean, pose_std=pose_std)
-        return (tuple(new_hidden), y, pos, rot), (y, pos, rot)
+        out = (y, pos, rot) + ((rec["inputs"],) if self.record else ())
+        return (tuple(new_hidden), y, pos, rot), out
 
     @nn.nowrap
     def initialize_carry(self, rng, input_shape):  # the hidden-state initializer provides the carry
@@ -188,6 +199,73 @@ class RecurrentDecoder(nn.RNNCellBase):
     @property
     def num_feature_axes(self) -> int:
         return 1
+
+
+def _scanned_decoder(cfg: ModelConfig, record: bool = False, name: Optional[str] = None, parent=None):
+    """:class:`RecurrentDecoder` under ``nn.scan`` over axis 1 (``parent=None``: a free module to ``apply``)."""
+    scan = nn.scan(RecurrentDecoder, variable_broadcast="params", variable_axes={"calibration": 0},
+                   split_rngs={"params": False}, in_axes=(1, nn.broadcast), out_axes=1)
+    return scan(cfg, record, name=name) if name else scan(cfg, record, parent=parent)
+
+
+def decoder_layers(cfg: ModelConfig) -> dict[str, int]:
+    """The recurrent decoder's dense layers (``params["decoder"]`` paths joined by ``/``) and their widths."""
+    layers = {"input_layer": cfg.gru_hidden}
+    for i in range(cfg.gru_layers):
+        layers[f"gru{i}/input"] = layers[f"gru{i}/hidden"] = 3 * cfg.gru_hidden
+    layers["output_layer"] = cfg.pose_dim
+    return layers
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0,))
+def decoder_hoisted(cfg: ModelConfig, params, carry: Carry, inputs, consts):
+    """The scanned decoder's outputs ``(ys, ps, qs)`` (as :class:`Generator`'s scan) with its weight gradients
+    taken out of the backward loop.
+
+    Reverse-mode through ``nn.scan`` accumulates every layer's weight gradient inside the backward loop:
+    per frame and layer one ``(in, batch) x (batch, out)`` product, a third of the ``small`` generator's
+    backward time. Here the backward loop runs with the weights as constants and returns each layer's
+    output cotangent ``dY_t`` (the gradient of a zero perturbation added to the layer's output); after the
+    loop, each layer's weight gradient is one product over all frames, ``dW = sum_t X_t^T dY_t``
+    (``X_t`` the layer's inputs, recorded by the forward loop), ``db = sum_t dY_t``. Same values as the
+    rolled gradient up to float summation order. Float kernels only (training); the primal (no gradient)
+    is the plain scan. References: the chain rule for ``Y = X W + b``; Ghorbani et al. 2023, §3.3.
+    """
+    return _scanned_decoder(cfg).apply({"params": params}, carry, inputs, consts)[1]
+
+
+def _hoisted_fwd(cfg, params, carry, inputs, consts):
+    b, t = inputs[0].shape[:2]
+    zeros = {k: jnp.zeros((b, t, n), inputs[0].dtype) for k, n in decoder_layers(cfg).items()}
+
+    def run(carry, inputs, consts, perturb):
+        y, p, q, rec = _scanned_decoder(cfg, record=True).apply({"params": params}, carry, inputs + (perturb,),
+                                                                 consts)[1]
+        return (y, p, q), rec
+
+    out, vjp, rec = jax.vjp(run, carry, inputs, consts, zeros, has_aux=True)
+    return out, (vjp, rec, params)
+
+
+def _hoisted_bwd(cfg, res, g):
+    vjp, rec, params = res
+    d_carry, d_inputs, d_consts, d_out = vjp(g)
+    grads = {}
+    for key in decoder_layers(cfg):
+        x, dy = rec[key], d_out[key]
+        layer = {"kernel": jnp.einsum("bti,bto->io", x, dy).astype(x.dtype), "bias": jnp.sum(dy, axis=(0, 1))}
+        parts = key.split("/")
+        (grads.setdefault(parts[0], {}) if len(parts) == 2 else grads)[parts[-1]] = layer
+    grads = jax.tree_util.tree_map(lambda g_, p: g_.astype(p.dtype), grads, params)
+    return grads, d_carry, d_inputs, d_consts
+
+
+decoder_hoisted.defvjp(_hoisted_fwd, _hoisted_bwd)
+
+
+def _float_params(tree) -> bool:
+    return all(not isinstance(leaf, QuantKernel)
+               for leaf in jax.tree_util.tree_leaves(tree, is_leaf=lambda x: isinstance(x, QuantKernel)))
 
 
 def _prepare(cfg: ModelConfig, pose0, root_position0, root_rotation0, facing, speech, style, pose_mean, pose_std):
@@ -225,13 +303,11 @@ class Generator(nn.Module):
     """
 
     cfg: ModelConfig
+    hoist_weight_grads: bool = True  # gradients through decoder_hoisted (same values); False: the plain scan
 
     def setup(self):
         self.initializer = HiddenStateInitializer(self.cfg, name="initializer")
-        scan = nn.scan(RecurrentDecoder, variable_broadcast="params", variable_axes={"calibration": 0},
-                       split_rngs={"params": False},
-                       in_axes=(1, nn.broadcast), out_axes=1)
-        self.decoder = scan(self.cfg, name="decoder")
+        self.decoder = _scanned_decoder(self.cfg, name="decoder")
 
     def initial_carry(self, pose0, root_position0, root_rotation0, facing, style_seq, in_scale=None) -> Carry:
         hidden = self.initializer(pose0 if in_scale is None else pose0 * in_scale[None], local_facing(facing, root_rotation0), style_seq[:, 0])
@@ -243,7 +319,13 @@ class Generator(nn.Module):
         style, consts = _prepare(self.cfg, pose0, root_position0, root_rotation0, facing, speech, style,
                                  pose_mean, pose_std)
         carry = self.initial_carry(pose0, root_position0, root_rotation0, facing, style, consts[3])
-        _, (ys, ps, qs) = self.decoder(carry, (speech[:, 1:], style[:, 1:]), consts)
+        inputs = (speech[:, 1:], style[:, 1:])
+        params = self.variables.get("params", {}).get("decoder")
+        if (self.hoist_weight_grads and params is not None and not self.is_initializing()
+                and not self.is_mutable_collection("calibration") and _float_params(params)):
+            ys, ps, qs = decoder_hoisted(self.cfg, params, carry, inputs, consts)
+        else:
+            _, (ys, ps, qs) = self.decoder(carry, inputs, consts)
         out = _stack_outputs(pose0, root_position0, root_rotation0, ys, ps, qs)
         chex.assert_shape(out["pose"], speech.shape[:2] + (self.cfg.pose_dim,))
         return out

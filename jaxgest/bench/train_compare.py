@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import pathlib
 import shlex
@@ -62,15 +61,13 @@ def loss_curves(rows: list[dict], key: str = "loss") -> dict[str, tuple[list[int
 
 
 def tail_mean(values: list[float], tail: int) -> tuple[float, float]:
-    """Mean and standard error of the last ``tail`` values."""
-    v = values[-tail:]
-    if not v:
+    """Mean and standard error of the last ``tail`` values (:func:`jaxgest.zeggs.probes.mean_se`)."""
+    from jaxgest.zeggs.probes import mean_se
+
+    if not values:
         raise ValueError("no values")
-    m = sum(v) / len(v)
-    if len(v) < 2:
-        return m, float("nan")
-    var = sum((x - m) ** 2 for x in v) / (len(v) - 1)
-    return m, math.sqrt(var / len(v))
+    r = mean_se(values[-tail:])
+    return r["mean"], r["standard_error"]
 
 
 def _git(args, cwd):

@@ -253,7 +253,7 @@ def _hoisted_bwd(cfg, res, g):
     grads = {}
     for key in decoder_layers(cfg):
         x, dy = rec[key], d_out[key]
-        layer = {"kernel": jnp.einsum("bti,bto->io", x, dy).astype(x.dtype), "bias": jnp.sum(dy, axis=(0, 1))}
+        layer = {"kernel": jnp.einsum("bti,bto->io", x, dy), "bias": jnp.sum(dy, axis=(0, 1))}
         parts = key.split("/")
         (grads.setdefault(parts[0], {}) if len(parts) == 2 else grads)[parts[-1]] = layer
     grads = jax.tree_util.tree_map(lambda g_, p: g_.astype(p.dtype), grads, params)

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgest.motion import body, kinematics, rotations
+from jaxgest.motion import body, kinematics
 from jaxgest.motion.rotations import angular_error_rad  # noqa: F401 (re-exported; moved below baselines)
 from jaxgest.nn import gelu_exact, safe_norm
 from jaxgest.tgst import baselines
@@ -327,6 +327,18 @@ def mean_angular_error_deg(pred: jax.Array, target: jax.Array) -> jax.Array:
     return jnp.degrees(jnp.mean(angular_error_rad(pred, target), axis=(1, 2)))
 
 
+def _body_positions_joint_major(upper: jax.Array, lower: jax.Array) -> jax.Array:
+    """:func:`body_positions` as ``(21, 3, ..., F)`` (joints and components leading, the layout of
+    :func:`jaxgest.motion.kinematics.fk_expmap_positions_joint_major`)."""
+    sk = body.body_skeleton()
+    order = np.array([body.BODY.index(n) for n in sk.names])
+    ex = jnp.concatenate([upper, lower], axis=-1)
+    ex = jnp.moveaxis(ex.reshape(ex.shape[:-1] + (len(body.BODY), 3)), (-2, -1), (0, 1))[order]  # rows: cheap
+    offsets = np.array(sk.offsets, np.float32)
+    offsets[np.asarray(sk.parents) < 0] = 0.0  # the root at the origin
+    return kinematics.fk_expmap_positions_joint_major(ex, offsets, tuple(int(p) for p in sk.parents))
+
+
 def body_positions(upper: jax.Array, lower: jax.Array) -> jax.Array:
     """Joint positions ``(..., F, 21, 3)`` (cm) of the canonical body posed by body exp-maps.
 
@@ -335,26 +347,19 @@ def body_positions(upper: jax.Array, lower: jax.Array) -> jax.Array:
     :func:`jaxgest.motion.body.body_skeleton`'s bones; the Hips at the origin with its (yaw-free) rotation
     kept, i.e. world positions up to the root's path and heading, which the content supplies at transfer.
     """
-    sk = body.body_skeleton()
-    order = np.array([body.BODY.index(n) for n in sk.names])
-    ex = jnp.concatenate([upper, lower], axis=-1)
-    ex = ex.reshape(ex.shape[:-1] + (len(body.BODY), 3))[..., order, :]
-    offsets = np.array(sk.offsets, np.float32)
-    offsets[np.asarray(sk.parents) < 0] = 0.0  # the root at the origin
-    offsets = jnp.broadcast_to(jnp.asarray(offsets, ex.dtype), ex.shape)
-    return kinematics.fk_positions(rotations.expmap_to_quat(ex), offsets, tuple(int(p) for p in sk.parents))
+    return jnp.moveaxis(_body_positions_joint_major(upper, lower), (0, 1), (-2, -1))
 
 
 def position_velocity_errors(pred_upper: jax.Array, pred_lower: jax.Array, upper: jax.Array,
                              lower: jax.Array) -> jax.Array:
     """``||(p_hat[t+1] - p_hat[t]) - (p[t+1] - p[t])||_2`` (cm per frame) per frame pair and joint,
     ``(batch, F - 1, 21)`` in :func:`jaxgest.motion.body.body_skeleton` order, with ``p`` the
-    :func:`body_positions` of the decoded and of the input exp-maps."""
+    :func:`body_positions` of the decoded and of the input exp-maps (computed joint-major, transposed once)."""
     chex.assert_equal_shape([pred_upper, upper])
     chex.assert_equal_shape([pred_lower, lower])
-    dp = jnp.diff(body_positions(pred_upper, pred_lower), axis=-3)
-    dt = jnp.diff(body_positions(upper, lower), axis=-3)
-    return safe_norm(dp - dt)
+    dp = jnp.diff(_body_positions_joint_major(pred_upper, pred_lower), axis=-1)  # (21, 3, ..., F - 1)
+    dt = jnp.diff(_body_positions_joint_major(upper, lower), axis=-1)
+    return jnp.moveaxis(safe_norm(dp - dt, axis=1), 0, -1)  # (21, ..., F - 1) -> (..., F - 1, 21)
 
 
 def position_velocity_loss(errors: jax.Array, joints: str = "all") -> jax.Array:

@@ -48,6 +48,31 @@ def test_jnp_fk_equals_numpy_fk():
     np.testing.assert_allclose(np.asarray(out), K.forward_kinematics(m), atol=1e-3)
 
 
+
+def test_joint_major_expmap_fk_equals_fk_positions():
+    """The training layout of FK (joints and components leading, exp-maps in) gives fk_positions's positions,
+    gradients included; a wrong layout is one clear error."""
+    rng = np.random.default_rng(1)
+    sk = sym_skeleton()
+    parents = tuple(int(p) for p in sk.parents)
+    ex = jnp.asarray(rng.normal(scale=0.8, size=(3, 5, len(parents), 3)), jnp.float32)  # (B, F, J, 3)
+    ex = ex.at[0, 0, 2].set(0.0)  # a zero rotation (the small-angle branch)
+    offsets = np.asarray(sk.offsets, np.float32)
+
+    def reference(e):
+        return K.fk_positions(R.expmap_to_quat(e), jnp.broadcast_to(jnp.asarray(offsets), e.shape), parents)
+
+    def joint_major(e):
+        return jnp.moveaxis(K.fk_expmap_positions_joint_major(jnp.moveaxis(e, (-2, -1), (0, 1)), offsets, parents),
+                            (0, 1), (-2, -1))
+
+    np.testing.assert_allclose(joint_major(ex), reference(ex), atol=1e-4)
+    w = jnp.asarray(rng.normal(size=ex.shape), jnp.float32)
+    g_ref, g_new = (jax.grad(lambda e, f=f: jnp.sum(jnp.sin(f(e)) * w))(ex) for f in (reference, joint_major))
+    np.testing.assert_allclose(g_new, g_ref, atol=1e-4)
+    with pytest.raises(ValueError, match="expmaps must be"):
+        K.fk_expmap_positions_joint_major(ex, offsets, parents)  # joints not leading
+
 def sym_skeleton():
     names = ("Hips", "Spine", "UpperLeg_L", "Foot_L", "UpperLeg_R", "Foot_R", "Arm_L", "Arm_R")
     parents = np.array([-1, 0, 0, 2, 0, 4, 1, 1])

@@ -6,11 +6,13 @@ from __future__ import annotations
 import dataclasses
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from jaxgest.tgst import transformer as T
 from jaxgest.tgst.transformer import (StyleTransformerEncoder, band_mask, blockwise_banded_attention,
                                       dense_banded_attention)
 
@@ -71,3 +73,22 @@ def test_tokens_beyond_omega_have_no_influence(encoders, i, j, impl):
     changed = not np.allclose(np.asarray(y0[0, 1 + i]), np.asarray(y1[0, 1 + i]), atol=1e-5)
     assert changed == (abs(i - j) <= 3)
     assert not np.allclose(np.asarray(aux0["cls"]), np.asarray(aux1["cls"]))  # CLS attends to all
+
+
+@pytest.mark.parametrize("n", [5, 12])
+def test_short_sequences_take_the_dense_form_with_the_same_output(monkeypatch, n):
+    """Up to SHORT_BLOCKS blocks the blockwise encoder computes the dense masked form (less work there);
+    its output, keys and CLS equal those of the blockwise computation (forced by SHORT_BLOCKS = 0)."""
+    tcfg = dataclasses.replace(TINY.model.transformer, omega=3, block_size=4, attention_impl="blockwise")
+    enc = StyleTransformerEncoder(tcfg)
+    tok = normal(3, (2, n, 64))
+    valid = jnp.arange(n)[None] < jnp.array([[n], [n - 2]])
+    variables = random_like(jax.eval_shape(enc.init, jax.random.key(1), tok), seed=2)
+    assert n <= T.SHORT_BLOCKS * tcfg.block_size
+    short = enc.apply(variables, tok, valid)
+    monkeypatch.setattr(T, "SHORT_BLOCKS", 0)
+    blocks = enc.apply(variables, tok, valid)
+    np.testing.assert_allclose(np.asarray(short[0][0]), np.asarray(blocks[0][0]), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(short[0][1, :n - 1]), np.asarray(blocks[0][1, :n - 1]), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(short[1]["cls"]), np.asarray(blocks[1]["cls"]), atol=1e-5)
+    assert "attention" not in short[1]

@@ -4,7 +4,8 @@
 
 ``TRAIN...`` is a ``jaxgest`` training command without ``--workdir`` (e.g. ``zeggs train --data D --preset
 small --steps 8000 --seed 0``). Each side runs ``python -m jaxgest.cli TRAIN... --workdir DIR/<side>`` with
-the package of that commit (a ``git worktree`` in ``DIR/src-<side>`` on ``PYTHONPATH``), one after the other,
+the package of that commit (a ``git worktree`` in ``DIR/src-<side>`` on ``PYTHONPATH``; paths in ``TRAIN`` made
+absolute, since a side runs in ``DIR``), one after the other,
 nothing else started by this tool beside it; the wall time is the whole process (data loading and
 compilation included). A side whose ``DIR/<side>/wall.json`` exists is not rerun (resume after an
 interruption; delete the file to rerun).
@@ -77,6 +78,13 @@ def _git(args, cwd):
     return out.stdout.strip()
 
 
+def absolute_paths(train: list[str]) -> list[str]:
+    """``train`` with every argument that names an existing file or folder (from the caller's directory) made
+    absolute: a side runs in ``--out`` (so that ``python -m`` imports the commit's worktree, not the package in
+    the caller's directory), where a relative ``--data ../shared/...`` would not resolve."""
+    return [str(pathlib.Path(a).resolve()) if not a.startswith("-") and os.path.exists(a) else a for a in train]
+
+
 def run_side(name: str, rev: str, out: pathlib.Path, train: list[str], repo: pathlib.Path) -> dict:
     """Train one side (skipped when its wall.json exists) and return its wall.json."""
     workdir, wall_file = out / name, out / name / "wall.json"
@@ -88,7 +96,7 @@ def run_side(name: str, rev: str, out: pathlib.Path, train: list[str], repo: pat
         _git(["worktree", "add", "--detach", "-f", str(src), commit], repo)
     elif _git(["rev-parse", "HEAD"], src) != commit:
         _git(["checkout", "-q", "--detach", commit], src)
-    cmd = [sys.executable, "-m", "jaxgest.cli", *train, "--workdir", str(workdir)]
+    cmd = [sys.executable, "-m", "jaxgest.cli", *absolute_paths(train), "--workdir", str(workdir)]
     env = {**os.environ, "PYTHONPATH": str(src) + (os.pathsep + os.environ["PYTHONPATH"]
                                                   if os.environ.get("PYTHONPATH") else "")}
     workdir.mkdir(parents=True, exist_ok=True)

@@ -51,3 +51,11 @@ def test_missing_training_command_is_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit):
         tc.main(["--before", "x", "--out", str(tmp_path)])
     assert "give the training command after --" in capsys.readouterr().err
+
+
+def test_paths_of_the_training_command_are_made_absolute(tmp_path, monkeypatch):
+    (tmp_path / "data").mkdir()
+    monkeypatch.chdir(tmp_path)
+    out = tc.absolute_paths(["tgst", "train", "--data", "data", "--preset", "fit-motion", "--seed", "0"])
+    assert out[3] == str((tmp_path / "data").resolve())
+    assert out[:3] == ["tgst", "train", "--data"] and out[4:] == ["--preset", "fit-motion", "--seed", "0"]

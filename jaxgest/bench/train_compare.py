@@ -1,6 +1,7 @@
 """One training run end to end at two commits, same data, seed and machine: wall times and loss curves.
 
 ``python -m jaxgest.bench.train_compare --before REV --after REV --out DIR [--png FILE] [--json FILE] -- TRAIN...``
+(``--table RESULTS``: only the Markdown table of such a results file, for the docs)
 
 ``TRAIN...`` is a ``jaxgest`` training command without ``--workdir`` (e.g. ``zeggs train --data D --preset
 small --steps 8000 --seed 0``). Each side runs ``python -m jaxgest.cli TRAIN... --workdir DIR/<side>`` with
@@ -124,6 +125,24 @@ def summarize(workdir, wall: dict, tail: int) -> dict:
             "steps_per_s": steps / wall["seconds"], "stages": stages}
 
 
+def markdown_table(res: dict) -> str:
+    """The before / after table of a results file's ``results`` (``--table FILE``): wall, steps/s, each stage's
+    final loss ± SE, the speed-up, and the other seeds' final losses when there are some."""
+    stages = list(res["before"]["stages"])
+    head = ["run", "commit", "wall", "steps/s"] + [f"final loss, {st}" for st in stages]
+    rows = [head, ["---"] * 2 + ["---:"] * (len(head) - 2)]
+    for name in ("before", "after"):
+        r = res[name]
+        rows.append([name, r["commit"][:7], f"{r['wall_s']:,.0f} s", f"{r['steps_per_s']:.2f}"]
+                    + [f"{r['stages'][st]['final_loss']:.4f} ± {r['stages'][st]['final_loss_se']:.4f}"
+                       for st in stages])
+    for seed, finals in sorted(res.get("other_seeds", {}).items()):
+        rows.append([f"{seed} (after's code)", "", "", ""] + [f"{finals[st]:.4f}" if st in finals else "-"
+                                                               for st in stages])
+    lines = ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines + ["", f"Speed-up (wall, before / after): **{res['speedup']:.2f}x**."])
+
+
 def plot(sides: dict[str, pathlib.Path], png, smooth: int, title: str):
     import matplotlib
     matplotlib.use("Agg")
@@ -156,9 +175,9 @@ def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     train = argv[argv.index("--") + 1:] if "--" in argv else []
     ap = argparse.ArgumentParser(prog="python -m jaxgest.bench.train_compare", description=__doc__.split("\n")[0])
-    ap.add_argument("--before", required=True, help="commit (or any git revision) of the 'before' run")
+    ap.add_argument("--before", help="commit (or any git revision) of the 'before' run")
     ap.add_argument("--after", default="HEAD", help="commit of the 'after' run (default HEAD)")
-    ap.add_argument("--out", required=True, help="folder for the worktrees, workdirs and logs")
+    ap.add_argument("--out", help="folder for the worktrees, workdirs and logs")
     ap.add_argument("--png", help="overlaid loss curves")
     ap.add_argument("--json", help="stamped results file")
     ap.add_argument("--tail", type=int, default=20, help="final loss = mean of the last N logged losses")
@@ -166,7 +185,18 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds-of", nargs="*", default=[],
                     help="workdirs of other seeds (the spread of final losses)")
     ap.add_argument("--title", default="")
+    ap.add_argument("--table", metavar="RESULTS", help="only print the Markdown table of a results file")
     a = ap.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
+    if a.table:
+        from jaxgest.runtime.provenance import read_results
+        try:
+            print(markdown_table(read_results(a.table)["results"]))
+        except DataError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        return 0
+    if not a.before or not a.out:
+        ap.error("--before and --out are required (or --table RESULTS)")
     if not train:
         ap.error("give the training command after --, e.g. -- zeggs train --data D --preset small --seed 0")
     repo = pathlib.Path(__file__).resolve().parents[2]

@@ -1,8 +1,10 @@
 """Per-operation profile of the jitted TGST training steps (the ``peer_train_*`` cases' JAX side), no torch.
 
 ``python -m jaxgest.bench.train_op_profile [autoencoder|transformer ...]`` (env ``N`` profiled calls, default 3;
-``TOP`` ops listed, default 15): the ``paper`` preset's steps at their batch shapes (autoencoder 32 x 256
-frames; transformer 8 pairs of 1280 frames, authors' variant), random weights, under
+``TOP`` ops listed, default 15; ``PRESET``, default ``paper``; ``WINDOW``, the transformer's frames, default the
+preset's): the preset's steps at their batch shapes (``paper``: autoencoder 32 x 256 frames; transformer 8 pairs of
+1280 frames; ``PRESET=fit-motion WINDOW=288`` is what a fit-motion run on Bandai-Namco-1 trains), the authors'
+transformer variant (the peers' network), random weights, under
 ``jax.profiler.trace`` (the method of :mod:`jaxgest.bench.tgst_profile`: each XLA operation's event time
 summed over XLA's threads, so on a busy machine the times include preemption). Prints the total per call,
 the time per kind of operation (conv or dot / YNNPACK fusion / elementwise or copy) and per direction
@@ -52,19 +54,24 @@ def profile_compiled(compiled, args, *, calls: int = 3, top: int = 15, title: st
     return {"total_ns": total, "kinds": dict(kinds), "directions": dict(dirs)}
 
 
-def main(stages=("autoencoder", "transformer"), calls: int = 3, top: int = 15) -> dict:
+def main(stages=("autoencoder", "transformer"), calls: int = 3, top: int = 15, preset: str = "paper",
+         window: int | None = None) -> dict:
     from jaxgest.bench.cases import peers_train as PT
 
     out = {}
     for stage in stages:
-        case = PT.ae_case(with_torch=False) if stage == "autoencoder" else PT.transformer_case(with_torch=False)
+        case = (PT.ae_case(preset, with_torch=False) if stage == "autoencoder"
+                else PT.transformer_case(preset, with_torch=False, window=window))
         args = case.make_args()
         compiled = case.impls[0].fn.lower(*args).compile()
-        out[stage] = profile_compiled(compiled, args, calls=calls, top=top, title=f"TGST {stage} training step "
-                                      f"(batch {case.batch} x {case.frames} frames)")
+        ops = sum(1 for line in compiled.as_text().splitlines() if " fusion(" in line or " dot(" in line
+                  or " convolution(" in line or " custom-call(" in line)
+        out[stage] = profile_compiled(compiled, args, calls=calls, top=top, title=f"TGST {preset} {stage} training "
+                                      f"step (batch {case.batch} x {case.frames} frames, {ops} XLA operations)")
     return out
 
 
 if __name__ == "__main__":
     main(tuple(sys.argv[1:]) or ("autoencoder", "transformer"), int(os.environ.get("N", "3")),
-         int(os.environ.get("TOP", "15")))
+         int(os.environ.get("TOP", "15")), os.environ.get("PRESET", "paper"),
+         int(os.environ["WINDOW"]) if os.environ.get("WINDOW") else None)

@@ -45,6 +45,9 @@ def test_report_of_two_finished_runs(tmp_path, capsys):
     assert res["before"]["stages"]["train"]["final_loss"] == pytest.approx(2.5)
     assert res["after"]["steps_per_s"] == pytest.approx(2.0)
     assert "speed-up (wall, before / after): 2.000x" in capsys.readouterr().out
+    assert tc.main(["--table", str(js)]) == 0
+    table = capsys.readouterr().out
+    assert "| before | bbbbbbb | 200 s | 1.00 | 2.5000 ± 0.5000 |" in table and "**2.00x**" in table
 
 
 def test_missing_training_command_is_one_line(tmp_path, capsys):

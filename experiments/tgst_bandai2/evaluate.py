@@ -41,6 +41,7 @@ def main() -> int:
     from jaxgest.motion import datasets
     from jaxgest.runtime.provenance import write_results
     from jaxgest.tgst import multitake as mt
+    from jaxgest.tgst import multitake_eval as me
 
     ap = argparse.ArgumentParser()
     ap.add_argument("config", nargs="?")
@@ -50,14 +51,14 @@ def main() -> int:
     t0 = time.perf_counter()
     try:
         clips = datasets.load_folder(a.data)
-        proto = mt.multitake_protocol()
+        proto = me.multitake_protocol()
         if a.table1:
             test = mt.split_by_take(clips, mt.SPLITS["test"])
             speeds = [{"clip": str(c.path), "cell": f"{c.content}/{c.style}",
-                       "speed": mt.arm_speed(mt.FeatureCache(proto, c.motion.fps)(c)[1])}
+                       "speed": me.arm_speed(me.FeatureCache(proto, c.motion.fps)(c)[1])}
                       for c in mt.split_by_take(clips, [1, 2, 3, 4, 5, 6, 7, 8])]
             results = {"protocol": proto.describe(), "window": {"theta_at_60": 64},
-                       "triples": mt.cross_validity(clips, protocol=proto, progress=True), "arm_speeds": speeds,
+                       "triples": me.cross_validity(clips, protocol=proto, progress=True), "arm_speeds": speeds,
                        "num_test_clips": len(test), "wall_s": time.perf_counter() - t0}
             write_results(HERE / "results" / "table1.json", _round(results), {"data": a.data, "takes": "006-008"})
             return 0
@@ -68,15 +69,15 @@ def main() -> int:
         held = cfg["hold_out_content"]
         pairs = mt.make_multitake_pairs(clips, exemplar_takes=EXEMPLAR_TAKES, contents=[held] if held else None)
         train = [c for c in mt.split_by_take(clips, cfg["train_takes"]) if c.content != held]
-        pca = mt.fit_pca(model, train)
+        pca = me.fit_pca(model, train)
         first = cfg["seed"] == 0 and not held and not cfg.get("extra_data")  # full_s0: variants, controls, oracle
         if not first and not held:  # seeds 1-2 of the full runs: the inter conditions only (CPU time)
             pairs = [p for p in pairs if p.condition != "intra"]
-        report = mt.evaluate_pairs(model, pairs, protocol=proto, pca=pca, progress=True,
+        report = me.evaluate_pairs(model, pairs, protocol=proto, pca=pca, progress=True,
                                    oracle_every=4 if first else 0, controls=first,
-                                   variants=mt.VARIANTS if first else ("mirror",))
+                                   variants=me.VARIANTS if first else ("mirror",))
         test = mt.split_by_take(clips, mt.SPLITS["test"])
-        report["round_trip"] = mt.round_trip_speeds(model, [c for c in test if not held or c.content == held], proto)
+        report["round_trip"] = me.round_trip_speeds(model, [c for c in test if not held or c.content == held], proto)
         report["exemplar_takes"] = EXEMPLAR_TAKES
         report["wall_s"] = time.perf_counter() - t0
     except DataError as e:

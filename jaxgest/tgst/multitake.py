@@ -1,6 +1,6 @@
 """Multi-take TGST evaluation (Bandai-Namco-2; docs/design.md §5 "Multi-take data"): splits by take and the pairs of
 the three conditions with their ground-truth takes. The per-pair errors and controls are
-:mod:`jaxgest.tgst.multitake_eval` (its names also read from here).
+:mod:`jaxgest.tgst.multitake_eval`.
 
 * :func:`take_of` / :func:`split_by_take` / :func:`link_split` -- the take number of a Bandai-Namco clip
   (``dataset-2_{content}_{style}_{take}.bvh``), train 001-004 / validate 005 / test 006-008, and a training
@@ -139,15 +139,3 @@ def make_multitake_pairs(clips: Sequence, takes: Sequence[int] = SPLITS["test"],
                         pairs.append(TakePair(condition_of(c.content, e.content), c, e, gts))
     return pairs
 
-
-# The scoring half lives in :mod:`jaxgest.tgst.multitake_eval`; its names are read here too (lazily: that module
-# imports this one).
-_EVAL_NAMES = ('VARIANTS', 'ERRORS', 'multitake_protocol', 'window_frames', 'FeatureCache', 'errors_against', 'collage_bound', 'hands_oracle', 'pca_round_trip', 'fit_pca', 'evaluate_pairs', 'arm_speed', 'round_trip_speeds', 'cross_validity')
-
-
-def __getattr__(name):
-    if name in _EVAL_NAMES:
-        from jaxgest.tgst import multitake_eval
-
-        return getattr(multitake_eval, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

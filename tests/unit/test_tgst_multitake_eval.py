@@ -11,6 +11,7 @@ import pytest
 from jaxgest.motion.datasets import Clip
 from jaxgest.motion.synthetic import render_clip
 from jaxgest.tgst import multitake as mt
+from jaxgest.tgst import multitake_eval as me
 from jaxgest.tgst.api import load_model
 
 
@@ -31,7 +32,7 @@ def test_evaluate_pairs_rows_and_controls(clips, tgst_workdir):
     model = load_model(tgst_workdir)
     pairs = mt.make_multitake_pairs(clips, exemplar_takes=1, contents=["wave-left-hand"])
     assert {p.condition for p in pairs} == {"intra", "inter-mirror"} and len(pairs) == 6
-    report = mt.evaluate_pairs(model, pairs, methods=("soft", "hard"), pca=mt.fit_pca(model, clips),
+    report = me.evaluate_pairs(model, pairs, methods=("soft", "hard"), pca=me.fit_pca(model, clips),
                                oracle_every=2)
     recs = report["pairs"]
     assert len(recs) == 6 and all("rows" in r for r in recs)
@@ -43,7 +44,7 @@ def test_evaluate_pairs_rows_and_controls(clips, tgst_workdir):
         assert set(rows) == expected
         assert rows["content_as_is"]["content"] == 0.0
         for row in expected - {"collage|as_is", "collage|mirror"}:
-            assert all(np.isfinite(rows[row][k]) for k in mt.ERRORS), row
+            assert all(np.isfinite(rows[row][k]) for k in me.ERRORS), row
         # the mirrored frames only add poses: the collage bound can only go down
         assert rows["collage|mirror"]["content"] <= rows["collage|as_is"]["content"] + 1e-12
         # the gt_take row's ground-truth columns are the take-to-take floor: two real takes of one cell

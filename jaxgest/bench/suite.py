@@ -19,6 +19,7 @@ import time
 from jaxgest.bench import harness, machine, report
 from jaxgest.bench.cases import all_cases
 from jaxgest.bench.options import add_arguments
+from jaxgest.bench.records import validate_document
 from jaxgest.runtime.errors import JaxgestError
 from jaxgest.runtime.io import check_output_path, write_text_atomic
 
@@ -90,7 +91,7 @@ def run(args) -> tuple[dict, int]:
            "ratios": report.ratios(records), "peer_ratios": report.peer_ratios(records),
            "peer_compile_ratios": report.peer_compile_ratios(records),
            "failures": failures, "records": records, **extras}
-    harness.validate_document(doc)
+    validate_document(doc)
     print()
     print(report.markdown_table(records))
     for extra in (report.ratio_table(records), report.peer_table(records), report.peer_compile_table(records),

@@ -121,46 +121,33 @@ def fk_positions(rotations: jax.Array, translations: jax.Array, parents: Sequenc
 
 
 def fk_expmap_positions_joint_major(expmaps: jax.Array, offsets, parents: Sequence[int]) -> jax.Array:
-    """:func:`fk_positions` of exp-map rotations with the joints and components leading: ``expmaps (J, 3, ...)``,
-    constant bone ``offsets (J, 3)`` (NumPy; a root's offset is its position) -> world positions ``(J, 3, ...)``.
+    """:func:`fk_positions` of exp-map rotations with the joints leading: ``expmaps (J, ..., 3)``, constant bone
+    ``offsets (J, 3)`` (NumPy; a root's offset is its position) -> world positions ``(J, ..., 3)``.
 
     The same equations (``G_j = G_parent(j) * q_j``, ``p_j = p_parent(j) + G_parent(j) t_j``, one tree level at a
-    time, :func:`jaxgest.motion.rotations.expmap_to_quat` for the rotations), laid out for a training step: each
-    quaternion and position component is a contiguous ``(n_level, ...)`` array, so choosing a level's parents is
-    a copy of whole rows and the Hamilton product and the rotation of a constant offset are elementwise over the
-    frames. With joints second to last (``fk_positions``) the same step is a strided gather per component and
-    scatter-adds in the backward pass: the TGST autoencoder step's displacement term ran 3.3x slower that way
-    (value and gradient, 32 x 256 frames).
+    time), laid out for a training step: choosing a level's parents is a copy of whole rows. With the joints
+    second to last (``fk_positions``) it is a strided gather, and a scatter-add in the backward pass: the TGST
+    autoencoder step's displacement term ran ~4x slower that way (value and gradient, 32 x 256 frames).
     """
     levels, where = _fk_levels(tuple(int(p) for p in parents))
     offsets = np.asarray(offsets, np.float32)
-    want = (len(parents), 3)
-    if expmaps.shape[:2] != want or offsets.shape != want:
-        raise ValueError(f"expmaps must be (J, 3, ...) and offsets (J, 3) for J = {len(parents)}, got "
+    if expmaps.shape[0] != len(parents) or expmaps.shape[-1] != 3 or offsets.shape != (len(parents), 3):
+        raise ValueError(f"expmaps must be (J, ..., 3) and offsets (J, 3) for J = {len(parents)}, got "
                          f"{expmaps.shape} and {offsets.shape}")
-    x, y, z = expmaps[:, 0], expmaps[:, 1], expmaps[:, 2]
-    t2 = x * x + y * y + z * z  # expmap_to_quat, componentwise (Grassia 1998, eq. 3-4)
-    small = t2 < 1e-8
-    t = jnp.sqrt(jnp.where(small, 1.0, t2))
-    half_sinc = jnp.where(small, 0.5 - t2 / 48.0, jnp.sin(0.5 * t) / t)
-    q = jnp.stack([jnp.where(small, 1.0 - t2 / 8.0, jnp.cos(0.5 * t)), x * half_sinc, y * half_sinc, z * half_sinc],
-                  axis=1)  # (J, 4, ...)
-    tail = (1,) * (expmaps.ndim - 2)
+    q = R.expmap_to_quat(expmaps)
+    lead = (1,) * (expmaps.ndim - 2)
+
+    def bones(idx):  # the offsets of joints idx, broadcast over the frames
+        return jnp.broadcast_to(jnp.asarray(offsets[idx]).reshape((len(idx),) + lead + (3,)),
+                                (len(idx),) + expmaps.shape[1:])
+
     root = levels[0][0]
-    grot = q[root]
-    gpos = jnp.broadcast_to(jnp.asarray(offsets[root]).reshape((len(root), 3) + tail), (len(root), 3) + x.shape[1:])
+    grot, gpos = q[root], bones(root)
     out = [gpos]
     for idx, par in levels[1:]:
-        a, b = grot[par], q[idx]
-        aw, ax, ay, az = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
-        bw, bx, by, bz = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
-        grot = jnp.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                          aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=1)
-        o0, o1, o2 = (jnp.asarray(offsets[idx, k]).reshape((len(idx),) + tail) for k in range(3))
-        tx, ty, tz = 2 * (ay * o2 - az * o1), 2 * (az * o0 - ax * o2), 2 * (ax * o1 - ay * o0)  # quat_rotate
-        rotated = jnp.stack([o0 + aw * tx + (ay * tz - az * ty), o1 + aw * ty + (az * tx - ax * tz),
-                             o2 + aw * tz + (ax * ty - ay * tx)], axis=1)
-        gpos = gpos[par] + rotated
+        parent_rot = grot[par]
+        grot = R.quat_mul(parent_rot, q[idx])
+        gpos = gpos[par] + R.quat_rotate(parent_rot, bones(idx))
         out.append(gpos)
     return jnp.concatenate(out, axis=0)[where]
 

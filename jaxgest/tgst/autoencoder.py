@@ -328,12 +328,12 @@ def mean_angular_error_deg(pred: jax.Array, target: jax.Array) -> jax.Array:
 
 
 def _body_positions_joint_major(upper: jax.Array, lower: jax.Array) -> jax.Array:
-    """:func:`body_positions` as ``(21, 3, ..., F)`` (joints and components leading, the layout of
+    """:func:`body_positions` as ``(21, ..., F, 3)`` (joints leading, the layout of
     :func:`jaxgest.motion.kinematics.fk_expmap_positions_joint_major`)."""
     sk = body.body_skeleton()
     order = np.array([body.BODY.index(n) for n in sk.names])
     ex = jnp.concatenate([upper, lower], axis=-1)
-    ex = jnp.moveaxis(ex.reshape(ex.shape[:-1] + (len(body.BODY), 3)), (-2, -1), (0, 1))[order]  # rows: cheap
+    ex = jnp.moveaxis(ex.reshape(ex.shape[:-1] + (len(body.BODY), 3)), -2, 0)[order]  # rows: cheap
     offsets = np.array(sk.offsets, np.float32)
     offsets[np.asarray(sk.parents) < 0] = 0.0  # the root at the origin
     return kinematics.fk_expmap_positions_joint_major(ex, offsets, tuple(int(p) for p in sk.parents))
@@ -347,7 +347,7 @@ def body_positions(upper: jax.Array, lower: jax.Array) -> jax.Array:
     :func:`jaxgest.motion.body.body_skeleton`'s bones; the Hips at the origin with its (yaw-free) rotation
     kept, i.e. world positions up to the root's path and heading, which the content supplies at transfer.
     """
-    return jnp.moveaxis(_body_positions_joint_major(upper, lower), (0, 1), (-2, -1))
+    return jnp.moveaxis(_body_positions_joint_major(upper, lower), 0, -2)
 
 
 def position_velocity_errors(pred_upper: jax.Array, pred_lower: jax.Array, upper: jax.Array,
@@ -357,9 +357,9 @@ def position_velocity_errors(pred_upper: jax.Array, pred_lower: jax.Array, upper
     :func:`body_positions` of the decoded and of the input exp-maps (computed joint-major, transposed once)."""
     chex.assert_equal_shape([pred_upper, upper])
     chex.assert_equal_shape([pred_lower, lower])
-    dp = jnp.diff(_body_positions_joint_major(pred_upper, pred_lower), axis=-1)  # (21, 3, ..., F - 1)
-    dt = jnp.diff(_body_positions_joint_major(upper, lower), axis=-1)
-    return jnp.moveaxis(safe_norm(dp - dt, axis=1), 0, -1)  # (21, ..., F - 1) -> (..., F - 1, 21)
+    dp = jnp.diff(_body_positions_joint_major(pred_upper, pred_lower), axis=-2)  # (21, ..., F - 1, 3)
+    dt = jnp.diff(_body_positions_joint_major(upper, lower), axis=-2)
+    return jnp.moveaxis(safe_norm(dp - dt), 0, -1)  # (21, ..., F - 1) -> (..., F - 1, 21)
 
 
 def position_velocity_loss(errors: jax.Array, joints: str = "all") -> jax.Array:

@@ -50,7 +50,7 @@ def test_jnp_fk_equals_numpy_fk():
 
 
 def test_joint_major_expmap_fk_equals_fk_positions():
-    """The training layout of FK (joints and components leading, exp-maps in) gives fk_positions's positions,
+    """The training layout of FK (joints leading, exp-maps in) gives fk_positions's positions,
     gradients included; a wrong layout is one clear error."""
     rng = np.random.default_rng(1)
     sk = sym_skeleton()
@@ -63,8 +63,7 @@ def test_joint_major_expmap_fk_equals_fk_positions():
         return K.fk_positions(R.expmap_to_quat(e), jnp.broadcast_to(jnp.asarray(offsets), e.shape), parents)
 
     def joint_major(e):
-        return jnp.moveaxis(K.fk_expmap_positions_joint_major(jnp.moveaxis(e, (-2, -1), (0, 1)), offsets, parents),
-                            (0, 1), (-2, -1))
+        return jnp.moveaxis(K.fk_expmap_positions_joint_major(jnp.moveaxis(e, -2, 0), offsets, parents), 0, -2)
 
     np.testing.assert_allclose(joint_major(ex), reference(ex), atol=1e-4)
     w = jnp.asarray(rng.normal(size=ex.shape), jnp.float32)

@@ -21,6 +21,8 @@ import time
 HERE = pathlib.Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parents[1] / ".." / "shared" / "data" / "bandai-namco-2"
 EXEMPLAR_TAKES = 1
+#: the paper's four methods and the registered lever (``coherent``: not in the paper)
+METHODS = ("soft", "hard", "adain", "avatarnet", "coherent")
 
 
 def _round(x):
@@ -73,7 +75,7 @@ def main() -> int:
         first = cfg["seed"] == 0 and not held and not cfg.get("extra_data")  # full_s0: variants, controls, oracle
         if not first and not held:  # seeds 1-2 of the full runs: the inter conditions only (CPU time)
             pairs = [p for p in pairs if p.condition != "intra"]
-        report = me.evaluate_pairs(model, pairs, protocol=proto, pca=pca, progress=True,
+        report = me.evaluate_pairs(model, pairs, protocol=proto, pca=pca, progress=True, methods=METHODS,
                                    oracle_every=4 if first else 0, controls=first,
                                    variants=me.VARIANTS if first else ("mirror",))
         test = mt.split_by_take(clips, mt.SPLITS["test"])

@@ -117,6 +117,21 @@ class BatchedTransfer:
         return results, diag
 
 
+def argmax_steps(argmax) -> dict:
+    """How the chosen style tokens ``(Nc,)`` move from one content token to the next: the fractions of
+    steps of exactly +1 (``"one"``), 0 (``"zero"``), < 0 (``"back"``) and > 2 (``"far"``); NaN for fewer
+    than two tokens. Half-overlapping tokens (eq. 1) are cross-faded, so only a +1 step blends frames that
+    followed each other in the style clip."""
+    a = np.asarray(argmax)
+    if a.ndim != 1:
+        raise DataError(f"argmax_steps: expected token indices (Nc,), got shape {a.shape}")
+    if len(a) < 2:
+        return {k: float("nan") for k in ("one", "zero", "back", "far")}
+    d = np.diff(a)
+    return {"one": float(np.mean(d == 1)), "zero": float(np.mean(d == 0)), "back": float(np.mean(d < 0)),
+            "far": float(np.mean(d > 2))}
+
+
 def swap_diagnostics(weights: np.ndarray, num_queries: int | None = None, num_style: int | None = None) -> dict:
     """How a soft swap blends: statistics of swap weights ``(Nc, Ns)`` (rows on the simplex).
 
@@ -129,6 +144,9 @@ def swap_diagnostics(weights: np.ndarray, num_queries: int | None = None, num_st
          "effective_tokens": mean over rows of 1 / sum_m w_nm^2 (1 = one token, Ns = uniform),
          "argmax_within_1": fraction of rows whose argmax m has |m - n| <= 1,
          "chance_within_1": that fraction for an argmax uniform over the Ns real style tokens,
+         "step_one", "step_zero", "step_back", "step_far": of consecutive rows, the fractions whose argmax
+             advances by exactly one style token (the style's own timing), stays, goes back, or jumps
+             ahead by more than two (:func:`argmax_steps`; NaN with one row),
          "padding_mass", "num_queries", "num_style"}
 
     References: Kuriyama et al. 2022, eq. 4 (the soft swap weights W).
@@ -149,6 +167,7 @@ def swap_diagnostics(weights: np.ndarray, num_queries: int | None = None, num_st
         "argmax_within_1": float(np.mean(np.abs(am - n) <= 1)),
         "chance_within_1": float(chance.mean()),
         "padding_mass": float(w[:, ns:].sum(axis=1).mean()),
+        **{f"step_{k}": v for k, v in argmax_steps(am).items()},
         "num_queries": int(nq),
         "num_style": int(ns),
     }

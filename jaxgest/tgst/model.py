@@ -26,9 +26,10 @@ from jaxgest.tgst.transformer import StyleTransformer
 
 #: the four methods compared in the paper (§4.3, Tables 2-3)
 TRANSFER_METHODS = ("soft", "hard", "adain", "avatarnet")
-#: every ``method=`` accepted: the four plus ``"autoencoder"``, the content's plain autoencoder round trip
-#: (no style; a diagnostic and control)
-METHODS = TRANSFER_METHODS + ("autoencoder",)
+#: every ``method=`` accepted: the four, ``"coherent"`` (the tokens along one constant-rate path through the
+#: style, chosen by eq. 4's similarities; not in the paper, swap.coherent_swap_weights) and ``"autoencoder"``,
+#: the content's plain autoencoder round trip (no style; a diagnostic and control)
+METHODS = TRANSFER_METHODS + ("coherent", "autoencoder")
 Params = dict[str, Any]
 
 
@@ -134,14 +135,19 @@ def transformer_decode(tr_params: Params, encoded_content: jax.Array, encoded_st
 
 
 def swap_encoded(tr_params: Params, encoded_content: jax.Array, encoded_style: jax.Array,
-                 style_tokens: jax.Array, *, cfg: ModelConfig, hard: bool = False, style_valid=None):
-    """Decode and swap: eq. 3 then eq. 4 (or eq. 19 when ``hard``); returns (tokens, swap weights).
+                 style_tokens: jax.Array, *, cfg: ModelConfig, hard: bool = False, style_valid=None,
+                 coherent: bool = False):
+    """Decode and swap: eq. 3 then eq. 4 (or eq. 19 when ``hard``; the constant-rate path of
+    :func:`jaxgest.tgst.swap.coherent_swap_weights` when ``coherent``); returns (tokens, swap weights).
 
     style_valid: optional ``(batch, Ns)`` bool of the real style tokens of a padded style set (training on
     whole style clips, :func:`jaxgest.tgst.data.transformer_batch`): padded tokens get weight 0.
     """
     decoded, _ = transformer_decode(tr_params, encoded_content, encoded_style, cfg=cfg, style_valid=style_valid)
-    if hard:
+    if coherent:
+        weights = swap.coherent_swap_weights(decoded, encoded_style, cfg.swap_temperature,
+                                             similarity=cfg.swap_similarity, style_valid=style_valid)
+    elif hard:
         weights = swap.hard_swap_weights(decoded, encoded_style, similarity=cfg.swap_similarity,
                                          style_valid=style_valid)
     else:
@@ -151,11 +157,11 @@ def swap_encoded(tr_params: Params, encoded_content: jax.Array, encoded_style: j
 
 
 def transfer_tokens(tr_params: Params, content_tokens: jax.Array, style_tokens: jax.Array, *, cfg: ModelConfig,
-                    hard: bool = False):
+                    hard: bool = False, coherent: bool = False):
     """g^{s|c} from raw tokens ``(batch, Nc, d)``, ``(batch, Ns, d)`` -> (tokens ``(batch, Nc, d)``, aux)."""
     enc_c, aux_c = transformer_encode(tr_params, content_tokens, cfg=cfg)
     enc_s, aux_s = transformer_encode(tr_params, style_tokens, cfg=cfg)
-    tokens, weights = swap_encoded(tr_params, enc_c, enc_s, style_tokens, cfg=cfg, hard=hard)
+    tokens, weights = swap_encoded(tr_params, enc_c, enc_s, style_tokens, cfg=cfg, hard=hard, coherent=coherent)
     return tokens, {"swap_weights": weights, "content_cls": aux_c["cls"], "style_cls": aux_s["cls"]}
 
 
@@ -163,14 +169,15 @@ def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array
                      method: str = "soft", content_valid=None, style_valid=None):
     """Transfer latents ``(batch, Tc, 16)`` to the style of ``(batch, Ts, 16)``: (``(batch, Tc, 16)``, aux).
 
-    method: ``"soft"`` (eq. 4), ``"hard"`` (eq. 19), ``"adain"`` (eq. 17), ``"avatarnet"`` (eq. 18) or
-    ``"autoencoder"`` (the content latents unchanged). ``*_valid``: the latent frames of the real clips, an
+    method: ``"soft"`` (eq. 4), ``"hard"`` (eq. 19), ``"adain"`` (eq. 17), ``"avatarnet"`` (eq. 18),
+    ``"coherent"`` (not in the paper; :func:`swap_encoded`) or ``"autoencoder"`` (the content latents unchanged). ``*_valid``: the latent frames of the real clips, an
     int (the first frames) or a static ``(start, stop)`` range; the baselines' statistics ignore the padding.
     """
     w, h = cfg.token_width, cfg.token_stride
-    if method in ("soft", "hard"):
+    if method in ("soft", "hard", "coherent"):
         c_tok, s_tok = tokenize(content_z, w, h), tokenize(style_z, w, h)
-        tokens, aux = transfer_tokens(tr_params, c_tok, s_tok, cfg=cfg, hard=(method == "hard"))
+        tokens, aux = transfer_tokens(tr_params, c_tok, s_tok, cfg=cfg, hard=(method == "hard"),
+                                      coherent=(method == "coherent"))
         return detokenize(tokens, content_z.shape[1], w, h), aux
     if method == "adain":
         z = baselines.adain_latents(content_z, style_z, content_valid=content_valid, style_valid=style_valid)

@@ -1,7 +1,7 @@
 """Multi-take TGST evaluation, the scoring half (the splits and pairs are :mod:`jaxgest.tgst.multitake`): every
 method, input variant and control on every :class:`~jaxgest.tgst.multitake.TakePair` against its ground-truth
 takes (:func:`evaluate_pairs`), the controls' pieces (:func:`collage_bound`, :func:`hands_oracle`,
-:func:`pca_round_trip`), the arm-speed round trip (:func:`round_trip_speeds`) and Table 1's data-only
+:func:`token_collage`, :func:`pca_round_trip`), the arm-speed round trip (:func:`round_trip_speeds`) and Table 1's data-only
 cross-form check (:func:`cross_validity`). docs/design.md §5 "Multi-take data".
 """
 
@@ -94,6 +94,24 @@ def hands_oracle(model, content_motion, style_motion):
     model rate) -> the style token whose root-local hand positions are nearest to its own, decoded as a
     transfer (same encoder, tokens, cross-fade, decoder). What a perfect content similarity could reach with
     this exemplar's tokens. Returns a Motion on the content's rig. (Diagnostic, not in the paper.)"""
+    return token_collage(model, content_motion, style_motion, order="nearest")
+
+
+#: how :func:`token_collage` orders the style tokens it picks
+COLLAGE_ORDERS = ("nearest", "constant_rate")
+
+
+def token_collage(model, content_motion, style_motion, order: str = "nearest"):
+    """The content decoded from style tokens chosen by hand positions (the content metric's own features).
+
+    Each content token (16 frames at the model rate) is compared with every style token by the root-local
+    hand positions of their frames. ``order="nearest"``: each takes its nearest style token on its own (the
+    hands oracle); ``"constant_rate"``: all take the tokens along the one constant-rate path through the
+    style clip with the smallest mean distance (:func:`jaxgest.tgst.swap.constant_rate_path`), i.e. the
+    style's frames in their own order, re-timed at one rate. Decoded as a transfer (same encoder, tokens,
+    cross-fade, decoder); returns a Motion on the content's rig. (Diagnostic, not in the paper.)
+    References: Kuriyama et al. 2022, eqs. 1 and 4 (tokens, the swap whose choice this replaces).
+    """
     import jax.numpy as jnp
     import numpy as np
 
@@ -101,8 +119,11 @@ def hands_oracle(model, content_motion, style_motion):
     from jaxgest.motion import body, kinematics
     from jaxgest.motion.datasets import resample_motion
     from jaxgest.tgst import model as M
+    from jaxgest.tgst.swap import constant_rate_path
     from jaxgest.tgst.tokens import detokenize, tokenize
 
+    if order not in COLLAGE_ORDERS:
+        raise ValueError(f"token_collage: unknown order {order!r} (expected one of {COLLAGE_ORDERS})")
     cfg, params = model.cfg, model.params
     red, w, h, lead = cfg.autoencoder.time_reduction, cfg.token_width, cfg.token_stride, cfg.edge_frames
     cu, su = model.body_arrays(content_motion, "content"), model.body_arrays(style_motion, "style")
@@ -121,8 +142,11 @@ def hands_oracle(model, content_motion, style_motion):
     hc = windows(hands(content_motion), [n * h * red - lead for n in range(len(tc))], w * red)
     hs = windows(hands(style_motion), [m * h * red for m in range(len(ts))], w * red)
     d2 = (hc * hc).sum(1)[:, None] + (hs * hs).sum(1)[None] - 2 * hc @ hs.T
-    toks = ts[np.argmin(d2, 1)]
-    z = detokenize(jnp.asarray(toks)[None], zc.shape[1], w, h)
+    if order == "nearest":
+        idx = np.argmin(d2, 1)
+    else:
+        idx = np.asarray(constant_rate_path(-jnp.sqrt(jnp.maximum(jnp.asarray(d2), 0.0))[None]))[0]
+    z = detokenize(jnp.asarray(ts[idx])[None], zc.shape[1], w, h)
     up, lo = M.decode(params["autoencoder"], z, cfg=cfg)
     up, lo = M.trim_clip(up, len(cu), cfg=cfg), M.trim_clip(lo, len(cu), cfg=cfg)
     return model.to_motion(np.asarray(up[0]), np.asarray(lo[0]), content_motion)
@@ -174,8 +198,8 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
     Returns ``{"protocol", "window", "pairs": [{"condition", "content", "exemplar", "style",
     "ground_truths", "rows": {row: {"content", "style", "gt_content", "gt_style"}} | "skipped": why}]}``,
     rows: ``"{method}|{variant}"`` (variants :data:`VARIANTS`), ``"autoencoder"`` (content round trip),
-    ``"pca16"`` (with ``pca``), ``"oracle_hands|{variant}"`` (on every ``oracle_every``-th pair, 0 = none: it
-    runs eagerly, ~2 s a pair), ``"content_as_is"``,
+    ``"pca16"`` (with ``pca``), ``"oracle_hands|{variant}"`` and ``"oracle_rate|{variant}"``
+    (:func:`token_collage` nearest / constant rate, on every ``oracle_every``-th pair, 0 = none: they run eagerly, ~2 s a pair), ``"content_as_is"``,
     ``"style_as_is"``, ``"gt_take"`` (each ground-truth take as the result, its gt columns against the other
     takes = the take-to-take floor; averaged over the takes; only with >= 2 takes), ``"collage|{variant}"``
     (:func:`collage_bound` of the exemplar's frames, without / with its mirrored frames: content and
@@ -238,6 +262,8 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
             if oracle_every and index % oracle_every == 0:
                 score(f"oracle_hands|{variant}",
                       lambda: plain(hands_oracle(model, pair.content.motion, style_in.motion)))
+                score(f"oracle_rate|{variant}", lambda: plain(
+                    token_collage(model, pair.content.motion, style_in.motion, order="constant_rate")))
         if pca is not None:
             key = id(pair.content)
             if key not in pca_feats:

@@ -1,9 +1,13 @@
-"""Token swapping: the soft swapper of eq. 4 and its hard (argmax) ablation, eq. 19.
+"""Token swapping: the soft swapper of eq. 4, its hard (argmax) ablation, eq. 19, and a time-coherent variant.
 
 The similarity is the plain dot product (no 1/sqrt(d) scaling, eq. 4) between decoded content tokens and
 the encoded style tokens, or optionally (``similarity="scaled"``) the dot product of LayerNorm-ed tokens
 divided by sqrt(d); the blend is applied to the *raw* style tokens g^s (not the encoded ones), so every
 output token is a convex combination of style tokens.
+
+``coherent_swap_weights`` (not in the paper) takes the style tokens along one constant-rate path through
+the style clip, chosen by the same similarities: the swap's per-token choices jump back and forth in the
+style clip, and the half-overlapping tokens of the cross-fade then blend unrelated frames.
 
 References: Kuriyama et al. 2022, §3.4, eq. 4; §4.3, eq. 19.
 """
@@ -69,6 +73,47 @@ def hard_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, simi
     """
     logits = swap_logits(decoded_content, encoded_style, similarity, style_valid)
     return jax.nn.one_hot(jnp.argmax(logits, axis=-1), logits.shape[-1], dtype=logits.dtype)
+
+
+#: rates (style tokens per content token) :func:`constant_rate_path` searches: 0.5 (half speed) .. 2.0
+COHERENT_RATES = tuple(round(0.5 + 0.05 * i, 2) for i in range(31))
+
+
+def constant_rate_path(scores: jax.Array, rates=COHERENT_RATES) -> jax.Array:
+    """The style-token indices ``(batch, Nc)`` of the constant-rate path with the highest mean score.
+
+    scores ``(batch, Nc, Ns)``: how well style token m fits content token n (e.g. log swap weights). Paths
+    ``idx_n = min(round(s + r n), Ns - 1)`` for every rate r in ``rates`` and start s in 0 .. Ns - 1; a path
+    may overrun the style's end by one token at most (it then holds the last token) unless no path fits, when
+    every path counts. Ties go to the first (rate, start) in that order. Not in the paper: a time-coherent
+    choice of the tokens eq. 4 blends. References: Kuriyama et al. 2022, eq. 4 (the scores); eq. 1 (tokens).
+    """
+    chex.assert_rank(scores, 3)
+    _, nc, ns = scores.shape
+    r = jnp.asarray(rates, jnp.float32)[:, None, None]
+    starts = jnp.arange(ns, dtype=jnp.float32)[None, :, None]
+    steps = jnp.arange(nc, dtype=jnp.float32)[None, None, :]
+    raw = jnp.round(starts + r * steps).astype(jnp.int32)  # (R, S, Nc)
+    idx = jnp.minimum(raw, ns - 1)
+    rows = jnp.broadcast_to(jnp.arange(nc)[None, None, :], idx.shape)
+    mean = jnp.mean(scores[:, rows, idx], axis=-1)  # (batch, R, S)
+    fits = (raw[..., -1] <= ns)[None]
+    mean = jnp.where(jnp.any(fits), jnp.where(fits, mean, -jnp.inf), mean)
+    best = jnp.argmax(mean.reshape(mean.shape[0], -1), axis=-1)
+    return idx.reshape(-1, nc)[best]
+
+
+def coherent_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, temperature: float = 1.0,
+                          similarity: str = "dot", style_valid=None, rates=COHERENT_RATES) -> jax.Array:
+    """One-hot weights ``(batch, Nc, Ns)`` on the :func:`constant_rate_path` of the log soft-swap weights.
+
+    The similarities and softmax of eq. 4 (``temperature``, ``similarity``, ``style_valid`` as in
+    :func:`soft_swap_weights`); each content token takes the one style token on the path. Not in the paper.
+    References: Kuriyama et al. 2022, eq. 4.
+    """
+    logits = swap_logits(decoded_content, encoded_style, similarity, style_valid)
+    path = constant_rate_path(jax.nn.log_softmax(logits / temperature, axis=-1), rates)
+    return jax.nn.one_hot(path, logits.shape[-1], dtype=logits.dtype)
 
 
 def nearest_token_weights(content_tokens: jax.Array, style_tokens: jax.Array, temperature: float = 0.0,

@@ -40,7 +40,8 @@ def test_evaluate_pairs_rows_and_controls(clips, tgst_workdir):
         rows = r["rows"]
         expected = {"soft|as_is", "hard|as_is", "soft|mirror", "hard|mirror", "autoencoder", "pca16",
                     "content_as_is", "style_as_is", "gt_take", "collage|as_is", "collage|mirror"}
-        expected |= {"oracle_hands|as_is", "oracle_hands|mirror"} if i % 2 == 0 else set()
+        if i % 2 == 0:
+            expected |= {f"oracle_{o}|{v}" for o in ("hands", "rate") for v in ("as_is", "mirror")}
         assert set(rows) == expected
         assert rows["content_as_is"]["content"] == 0.0
         for row in expected - {"collage|as_is", "collage|mirror"}:

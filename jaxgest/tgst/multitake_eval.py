@@ -196,7 +196,9 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
     """Errors of every method, input variant and control on every :class:`TakePair`.
 
     Returns ``{"protocol", "window", "pairs": [{"condition", "content", "exemplar", "style",
-    "ground_truths", "rows": {row: {"content", "style", "gt_content", "gt_style"}} | "skipped": why}]}``,
+    "ground_truths", "swap|{variant}": soft-swap diagnostics (:func:`jaxgest.tgst.batched.swap_diagnostics`,
+    with a soft or hard method), "rows": {row: {"content", "style", "gt_content", "gt_style"}} | "skipped":
+    why}]}``,
     rows: ``"{method}|{variant}"`` (variants :data:`VARIANTS`), ``"autoencoder"`` (content round trip),
     ``"pca16"`` (with ``pca``), ``"oracle_hands|{variant}"`` and ``"oracle_rate|{variant}"``
     (:func:`token_collage` nearest / constant rate, on every ``oracle_every``-th pair, 0 = none: they run eagerly, ~2 s a pair), ``"content_as_is"``,
@@ -218,7 +220,7 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
 
     proto = protocol or multitake_protocol()
     methods = tuple(methods)
-    batched = BatchedTransfer(model, (*methods, "autoencoder"), diagnostics=False)
+    batched = BatchedTransfer(model, (*methods, "autoencoder"), diagnostics=True)
     caches, inputs, records, pca_feats, ae_feats = {}, {}, [], {}, {}
     for index, pair in enumerate(tqdm(pairs, desc="multi-take pairs", unit="pair", disable=not progress)):
         fps = pair.content.motion.fps
@@ -253,7 +255,9 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
             if key not in inputs:
                 inputs[key] = (pair.exemplar, _exemplar_input(pair.exemplar, variant, proto))
             style_in = inputs[key][1]
-            outs, _ = batched.run(_Run(pair.content, style_in))
+            outs, diag = batched.run(_Run(pair.content, style_in))
+            if diag is not None:  # how the soft swap's weights (and the hard swap's argmax) move
+                rec[f"swap|{variant}"] = diag
             for m in methods:
                 score(f"{m}|{variant}", lambda m=m: plain(outs[m]))
             if id(pair.content) not in ae_feats:  # the round trip ignores the style: once per content clip

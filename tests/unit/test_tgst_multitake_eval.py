@@ -36,6 +36,7 @@ def test_evaluate_pairs_rows_and_controls(clips, tgst_workdir):
                                oracle_every=2)
     recs = report["pairs"]
     assert len(recs) == 6 and all("rows" in r for r in recs)
+    assert all(0 <= r["swap|mirror"]["step_one"] <= 1 for r in recs)
     for i, r in enumerate(recs):
         rows = r["rows"]
         expected = {"soft|as_is", "hard|as_is", "soft|mirror", "hard|mirror", "autoencoder", "pca16",

@@ -19,8 +19,10 @@ import numpy as np
 HERE = pathlib.Path(__file__).resolve().parent
 RES = HERE / "results"
 CONDS = ("intra", "inter-mirror", "inter-other")
-METHODS = ("soft", "hard", "adain", "avatarnet")
-NAMES = {"soft": "soft swap", "hard": "hard swap", "adain": "AdaIN", "avatarnet": "Avatar-net"}
+METHODS = ("soft", "hard", "adain", "avatarnet")  # the paper's four
+LEVER = "coherent"  # the registered lever (README, decision rules): not in the paper
+NAMES = {"soft": "soft swap", "hard": "hard swap", "adain": "AdaIN", "avatarnet": "Avatar-net",
+         "coherent": "coherent swap (lever)"}
 
 
 def load(name):
@@ -116,15 +118,16 @@ def cell(m):
     return f"{v:.3f}" + (f" +- {sd:.3f}" if sd is not None else "") + (f" ({n})" if n and n != 3 else "")
 
 
-def share(controls, runs, cond, control_row, err, contents=None):
-    """(control - soft) / (control - floor) on ``err`` with the mirror input; jackknife SE over groups."""
+def share(controls, runs, cond, control_row, err, contents=None, method="soft|mirror"):
+    """(control - method) / (control - floor) on ``err`` (default the soft swap, mirror input); jackknife SE
+    over groups."""
     seeds = [rows_by_pair(r) for _, r in runs]
     ctrl = rows_by_pair(controls)
     items = []
     for k, (c, rows) in ctrl.items():
         if c != cond or (contents is not None and not any(x in k[0] for x in contents)):
             continue
-        soft = [value(s[k][1], "soft|mirror", err) for s in seeds if k in s]
+        soft = [value(s[k][1], method, err) for s in seeds if k in s]
         soft = [x for x in soft if x is not None]
         ctl, floor = value(rows, control_row, err), value(rows, "gt_take", err)
         if soft and ctl is not None and floor is not None:
@@ -198,11 +201,14 @@ def main_tables(controls, runs):
                    "mean over pairs, then over seeds +- std over seeds; content m, style m/s)\n")
         out.append("| row | content (vs content clip) | style (vs exemplar + mirror) | gt_content | gt_style |")
         out.append("|---|---:|---:|---:|---:|")
-        rows = [(f"{NAMES[m]}, exemplar + mirror", f"{m}|mirror", runs) for m in METHODS]
-        rows += [(f"{NAMES[m]}, exemplar as is (seed 0)", f"{m}|as_is", runs[:1]) for m in METHODS]
+        rows = [(f"{NAMES[m]}, exemplar + mirror", f"{m}|mirror", runs) for m in (*METHODS, LEVER)]
+        rows += [(f"{NAMES[m]}, exemplar as is (seed 0)", f"{m}|as_is", runs[:1]) for m in (*METHODS, LEVER)]
         rows += [("AE round trip", "autoencoder", runs), ("PCA-16 round trip", "pca16", runs),
                  ("hands oracle, as is (seed 0, every 4th pair)", "oracle_hands|as_is", runs[:1]),
                  ("hands oracle, + mirror (seed 0, every 4th pair)", "oracle_hands|mirror", runs[:1]),
+                 ("hands collage at a constant rate, as is (seed 0, every 4th pair)", "oracle_rate|as_is", runs[:1]),
+                 ("hands collage at a constant rate, + mirror (seed 0, every 4th pair)", "oracle_rate|mirror",
+                  runs[:1]),
                  ("content as is", "content_as_is", []), ("style as is", "style_as_is", []),
                  ("a ground-truth take (gt columns: floor)", "gt_take", []),
                  ("collage bound, exemplar frames", "collage|as_is", []),
@@ -213,18 +219,40 @@ def main_tables(controls, runs):
     return "\n".join(out)
 
 
-def relations(controls, runs, contents=None):
-    out = ["| condition | soft - style as is, gt_content (< 0; seeds) | soft - content as is, gt_style (< 0) | "
+def relations(controls, runs, contents=None, method="soft|mirror"):
+    name = NAMES[method.split("|")[0]].split(" (")[0]
+    out = [f"| condition | {name} - style as is, gt_content (< 0; seeds) | {name} - content as is, gt_style (< 0) | "
            "gap share, style | gap share, content |", "|---|---|---|---|---|"]
     for cond in CONDS:
-        r1 = paired(controls, runs, cond, "style_as_is", "soft|mirror", "gt_content", contents)
-        r2 = paired(controls, runs, cond, "content_as_is", "soft|mirror", "gt_style", contents)
-        s1 = share(controls, runs, cond, "content_as_is", "gt_style", contents)
+        r1 = paired(controls, runs, cond, "style_as_is", method, "gt_content", contents)
+        r2 = paired(controls, runs, cond, "content_as_is", method, "gt_style", contents)
+        s1 = share(controls, runs, cond, "content_as_is", "gt_style", contents, method)
         # intra: "style as is" is itself a ground-truth take (the floor), so the content gap is empty
-        s2 = share(controls, runs, cond, "style_as_is", "gt_content", contents) if cond != "intra" else None
+        s2 = share(controls, runs, cond, "style_as_is", "gt_content", contents, method) if cond != "intra" else None
         f = lambda s: "-" if s is None else f"{s[0]:.0%} +- {s[1]:.0%}"
         out.append(f"| {cond} | {fmt_rel(r1)} {holds(r1, -1)} | {fmt_rel(r2)} {holds(r2, -1)} | {f(s1)} | {f(s2)} |")
     return "\n".join(out)
+
+
+def steps(runs, variant="mirror"):
+    """How the soft swap's argmax (the hard swap's choice) moves between consecutive content tokens: the
+    fractions of +1 / 0 / back / > 2 steps through the style clip, mean over pairs and seeds, per condition."""
+    out = []
+    for cond in CONDS:
+        per = defaultdict(list)
+        for _, r in runs:
+            for p in r["pairs"]:
+                d = p.get(f"swap|{variant}")
+                if p["condition"] == cond and d and d.get("step_one") is not None:
+                    for k in ("one", "zero", "back", "far"):
+                        per[k].append(d[f"step_{k}"])
+        if per:
+            out.append(f"{cond} {np.nanmean(per['one']):.0%} / {np.nanmean(per['zero']):.0%} / "
+                       f"{np.nanmean(per['back']):.0%} / {np.nanmean(per['far']):.0%}")
+    if not out:
+        return ""
+    return ("Argmax steps of the swap between consecutive content tokens (mirror input; +1 = the style's own "
+            "timing / 0 / back / > 2): " + "; ".join(out) + ".")
 
 
 def ordering(controls, runs):
@@ -260,8 +288,10 @@ def round_trip(runs, spread):
 
 def compact_table(controls, runs):
     """gt_content / gt_style of the headline rows in the three conditions (the full rows: TABLES.md)."""
-    rows = [(f"{NAMES[m]}, exemplar + mirror", f"{m}|mirror", runs) for m in METHODS]
+    rows = [(f"{NAMES[m]}, exemplar + mirror", f"{m}|mirror", runs) for m in (*METHODS, LEVER)]
     rows += [("soft swap, exemplar as is (seed 0)", "soft|as_is", runs[:1]), ("AE round trip", "autoencoder", runs),
+             ("hands collage, nearest token, + mirror (seed 0, 1/4 of pairs)", "oracle_hands|mirror", runs[:1]),
+             ("hands collage, constant rate, + mirror (seed 0, 1/4 of pairs)", "oracle_rate|mirror", runs[:1]),
              ("content as is", "content_as_is", []), ("style as is", "style_as_is", []),
              ("a ground-truth take (floor)", "gt_take", []), ("collage bound, + mirrored frames", "collage|mirror", [])]
     out = ["| row (gt_content m / gt_style m/s) | " + " | ".join(CONDS) + " |", "|---" + "|---:" * len(CONDS) + "|"]
@@ -270,6 +300,23 @@ def compact_table(controls, runs):
             f"{cell(mean_row(controls, rr, c, row, 'gt_content')).split(' ')[0]} / "
             f"{cell(mean_row(controls, rr, c, row, 'gt_style')).split(' ')[0]}" for c in CONDS) + " |")
     return "\n".join(out)
+
+
+def extra_tables(full):
+    """The zero-shot pairs in the full runs and under the lever, and the Bandai-Namco-1 addition (seed 0)."""
+    controls, parts = full[0][1], []
+    zero = [(f"zeroshot_s{s}", r) for s, r in seeds_of("zeroshot")]
+    held = ["wave-right-hand"]
+    parts += ["", "## Zero-shot pairs (content wave-right-hand), full runs", "", relations(controls, full, held)]
+    if zero and any(f"{LEVER}|mirror" in (p.get("rows") or {}) for _, r in zero for p in r["pairs"]):
+        parts += ["", "## Zero-shot runs, the lever", "", relations(controls, zero, held, f"{LEVER}|mirror")]
+    extra = load("eval_bn1plus_s0.json")
+    if extra:
+        parts += ["", "## Adding Bandai-Namco-1 to the training data (seed 0 only)", "",
+                  "Trained on Bandai-Namco-2 takes 001-004 + all of Bandai-Namco-1:", "",
+                  relations(controls, [("bn1plus_s0", extra)]), "", "Same pairs, Bandai-Namco-2 only (seed 0):",
+                  "", relations(controls, [("full_s0", controls)])]
+    return "\n".join(parts)
 
 
 def build():
@@ -288,16 +335,13 @@ def build():
                   "column with its spread over seeds: [TABLES.md](TABLES.md))", "", compact_table(controls, runs)]
         parts += ["", "### Relations (exemplar + mirror input; soft swap)", "", relations(controls, runs)]
         parts += ["", "### The four methods on style vs ground truth", "", ordering(controls, runs)]
+        if any(f"{LEVER}|mirror" in (p.get("rows") or {}) for _, r in runs for p in r["pairs"]):
+            parts += ["", "### The lever: the time-coherent swap (registered; not in the paper)", "",
+                      relations(controls, runs, method=f"{LEVER}|mirror"), "", steps(runs)]
         if zero:
-            parts += ["", f"### Zero-shot: content wave-right-hand held out of training ({len(zero)} seed(s))", "",
-                      relations(controls, zero, ["wave-right-hand"]),
-                      "", "Same pairs, full runs:", "", relations(controls, runs, ["wave-right-hand"])]
-        extra = load("eval_bn1plus_s0.json")
-        if extra:
-            parts += ["", "### Adding Bandai-Namco-1 to the training data (seed 0 only)", "",
-                      "Trained on Bandai-Namco-2 takes 001-004 + all of Bandai-Namco-1:", "",
-                      relations(controls, [("bn1plus_s0", extra)]), "", "Same pairs, Bandai-Namco-2 only (seed 0):",
-                      "", relations(controls, [("full_s0", controls)])]
+            parts += ["", f"### Zero-shot: content wave-right-hand held out of training ({len(zero)} seed(s); the "
+                      "same pairs in the full runs and the lever: [TABLES.md](TABLES.md))", "",
+                      relations(controls, zero, ["wave-right-hand"])]
         if spread is not None:
             parts += ["", "### Round trip: arm speed of the AE output over the input's (test clips)", "",
                       round_trip(full + zero, spread)]
@@ -312,7 +356,7 @@ def main():
     full = [(f"full_s{s}", r) for s, r in seeds_of("full")]
     if full:
         (HERE / "TABLES.md").write_text("# TGST on Bandai-Namco-2: Tables 2-3 in full (generated by tables.py)\n"
-                                        + main_tables(full[0][1], full) + "\n")
+                                        + main_tables(full[0][1], full) + "\n" + extra_tables(full) + "\n")
     if a.print:
         print(text)
         return 0

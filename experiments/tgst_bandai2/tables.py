@@ -251,8 +251,8 @@ def steps(runs, variant="mirror"):
                        f"{np.nanmean(per['back']):.0%} / {np.nanmean(per['far']):.0%}")
     if not out:
         return ""
-    return ("Argmax steps of the swap between consecutive content tokens (mirror input; +1 = the style's own "
-            "timing / 0 / back / > 2): " + "; ".join(out) + ".")
+    return ("Swap argmax steps between content tokens (+1 = the style's timing / 0 / back / > 2): "
+            + "; ".join(out) + ".")
 
 
 def ordering(controls, runs):

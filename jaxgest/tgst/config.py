@@ -51,7 +51,8 @@ AE_SAMPLINGS = ("windows", "content")
 POSITION_VELOCITY_JOINTS = ("all", "upper")  # joints of the optional joint-displacement term
 EXPMAP_BRANCHES = ("principal", "rest")  # branch of the training targets' exp-maps (body.nearest_branch)
 TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
-METHODS = ("soft", "hard", "adain", "avatarnet", "coherent", "autoencoder")  # InferenceConfig.method (tgst.model.METHODS)
+# InferenceConfig.method (tgst.model.METHODS)
+METHODS = ("soft", "hard", "adain", "avatarnet", "coherent", "autoencoder")
 
 
 @dataclasses.dataclass(frozen=True)

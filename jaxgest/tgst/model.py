@@ -161,7 +161,8 @@ def transfer_tokens(tr_params: Params, content_tokens: jax.Array, style_tokens: 
     """g^{s|c} from raw tokens ``(batch, Nc, d)``, ``(batch, Ns, d)`` -> (tokens ``(batch, Nc, d)``, aux)."""
     enc_c, aux_c = transformer_encode(tr_params, content_tokens, cfg=cfg)
     enc_s, aux_s = transformer_encode(tr_params, style_tokens, cfg=cfg)
-    tokens, weights = swap_encoded(tr_params, enc_c, enc_s, style_tokens, cfg=cfg, hard=hard, coherent=coherent)
+    tokens, weights = swap_encoded(tr_params, enc_c, enc_s, style_tokens, cfg=cfg, hard=hard,
+                                   coherent=coherent)
     return tokens, {"swap_weights": weights, "content_cls": aux_c["cls"], "style_cls": aux_s["cls"]}
 
 
@@ -170,8 +171,9 @@ def transfer_latents(tr_params: Params, content_z: jax.Array, style_z: jax.Array
     """Transfer latents ``(batch, Tc, 16)`` to the style of ``(batch, Ts, 16)``: (``(batch, Tc, 16)``, aux).
 
     method: ``"soft"`` (eq. 4), ``"hard"`` (eq. 19), ``"adain"`` (eq. 17), ``"avatarnet"`` (eq. 18),
-    ``"coherent"`` (not in the paper; :func:`swap_encoded`) or ``"autoencoder"`` (the content latents unchanged). ``*_valid``: the latent frames of the real clips, an
-    int (the first frames) or a static ``(start, stop)`` range; the baselines' statistics ignore the padding.
+    ``"coherent"`` (not in the paper; :func:`swap_encoded`) or ``"autoencoder"`` (the content latents
+    unchanged). ``*_valid``: the latent frames of the real clips, an int (the first frames) or a static
+    ``(start, stop)`` range; the baselines' statistics ignore the padding.
     """
     w, h = cfg.token_width, cfg.token_stride
     if method in ("soft", "hard", "coherent"):

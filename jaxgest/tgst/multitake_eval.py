@@ -1,8 +1,8 @@
 """Multi-take TGST evaluation, the scoring half (the splits and pairs are :mod:`jaxgest.tgst.multitake`): every
 method, input variant and control on every :class:`~jaxgest.tgst.multitake.TakePair` against its ground-truth
 takes (:func:`evaluate_pairs`), the controls' pieces (:func:`collage_bound`, :func:`hands_oracle`,
-:func:`token_collage`, :func:`pca_round_trip`), the arm-speed round trip (:func:`round_trip_speeds`) and Table 1's data-only
-cross-form check (:func:`cross_validity`). docs/design.md §5 "Multi-take data".
+:func:`token_collage`, :func:`pca_round_trip`), the arm-speed round trip (:func:`round_trip_speeds`) and
+Table 1's data-only cross-form check (:func:`cross_validity`). docs/design.md §5 "Multi-take data".
 """
 
 from __future__ import annotations
@@ -201,7 +201,8 @@ def evaluate_pairs(model, pairs: Sequence, *, protocol=None, methods: Sequence[s
     why}]}``,
     rows: ``"{method}|{variant}"`` (variants :data:`VARIANTS`), ``"autoencoder"`` (content round trip),
     ``"pca16"`` (with ``pca``), ``"oracle_hands|{variant}"`` and ``"oracle_rate|{variant}"``
-    (:func:`token_collage` nearest / constant rate, on every ``oracle_every``-th pair, 0 = none: they run eagerly, ~2 s a pair), ``"content_as_is"``,
+    (:func:`token_collage` nearest / constant rate, on every ``oracle_every``-th pair, 0 = none: they run
+    eagerly, ~2 s a pair), ``"content_as_is"``,
     ``"style_as_is"``, ``"gt_take"`` (each ground-truth take as the result, its gt columns against the other
     takes = the take-to-take floor; averaged over the takes; only with >= 2 takes), ``"collage|{variant}"``
     (:func:`collage_bound` of the exemplar's frames, without / with its mirrored frames: content and

@@ -3,7 +3,7 @@
 # (not configs/: that folder name is for configs of the experiments driver, python -m experiments):
 #   bash experiments/tgst_bandai2/run.sh [all|train|evaluate|tables] [runs/NAME.toml ...]
 # all (default): train every config given (default: every runs/*.toml, one at a time), evaluate them,
-# Table 1 (data only), then rewrite the README tables (about 1 h on 2 cores; needs ../shared/data/bandai-namco-2).
+# Table 1 (data only), then rewrite the README tables (about 1 h 10 min on 2 cores; needs ../shared/data/bandai-namco-2).
 set -euo pipefail
 HERE="$(cd "$(dirname "$0")" && pwd)"
 STEP="${1:-all}"; shift || true

@@ -1,6 +1,7 @@
 """The experiment driver: a config file in, a stamped results file out.
 
     python -m experiments run CONFIG... [--quick]     train (resumes), evaluate, write results/<config>[.quick].json
+    python -m experiments run CONFIG... --seeds 0 1   only those seeds, one results file each: <config>.s0.json ...
     python -m experiments table NAME [--quick]         rewrite the README tables NAME from their results files
     python -m experiments table --check                 exit 1 when a README table differs from its results
     python -m experiments list                         configs and tables
@@ -11,7 +12,9 @@ evaluation call the package's public functions (``jaxgest.tgst.trainer.train``, 
 process per ``run`` so the seeds of a config share compiled programs. Workdirs go to
 ``experiments/<experiment>/out/<config>[.quick]/s<seed>`` (git-ignored; a rerun resumes from their checkpoints);
 the results file is written with :func:`jaxgest.runtime.provenance.write_results` (commit, version, resolved config,
-command) to ``experiments/<experiment>/results/``.
+command) to ``experiments/<experiment>/results/``. With ``--seeds`` each seed gets its own stamped file
+(``<config>[.quick].s<seed>.json``), so a config's trainings can accumulate over several sessions; the tables
+merge them (:func:`experiments.tables.load_results`) until the whole config's file exists.
 """
 
 from __future__ import annotations
@@ -72,8 +75,19 @@ def load_config(path, quick: bool = False) -> dict:
     return cfg
 
 
-def results_path(cfg: dict) -> pathlib.Path:
-    return ROOT / cfg["experiment"] / "results" / (cfg["name"] + (".quick" if cfg["quick"] else "") + ".json")
+def results_path(cfg: dict, seed: int | None = None) -> pathlib.Path:
+    """``results/<config>[.quick].json``, or with ``seed`` the one-seed file ``<config>[.quick].s<seed>.json``."""
+    tail = (".quick" if cfg["quick"] else "") + (f".s{seed}" if seed is not None else "") + ".json"
+    return ROOT / cfg["experiment"] / "results" / (cfg["name"] + tail)
+
+
+def select_seeds(cfg: dict, seeds) -> list:
+    """``seeds`` (a subset of the config's, in the config's order), or a :class:`DriverError` naming the
+    config and the seeds it has."""
+    unknown = [s for s in seeds if s not in cfg["seeds"]]
+    if unknown:
+        raise DriverError(f"{cfg['path']}: seed {unknown[0]} is not among the config's seeds {cfg['seeds']}")
+    return [s for s in cfg["seeds"] if s in seeds]
 
 
 def out_dir(cfg: dict) -> pathlib.Path:
@@ -219,7 +233,8 @@ def run_zeggs(cfg: dict, log) -> dict:
         summary = train(str(train_data), str(wd), preset=cfg["preset"], steps=tr.get("steps"), seed=seed,
                         progress=False, log_every=tr.get("log_every", 50), ckpt_every=tr.get("ckpt_every"),
                         overrides=dict(cfg.get("overrides", {})))
-        per = {"train": {k: summary.get(k) for k in ("steps", "final", "steps_per_s") if k in summary},
+        per = {"train": {k: summary.get(k) for k in ("steps", "start_step", "final", "steps_per_s")
+                          if k in summary},
                "wall_s": {"train": round(time.perf_counter() - t0, 1)}}
         log(f"seed {seed}: trained in {per['wall_s']['train']:.0f} s")
         for name, folder, kw in (("training_scripts", train_data, {}), ("heldout_scripts", heldout, {}),
@@ -239,27 +254,38 @@ def run_zeggs(cfg: dict, log) -> dict:
 # ---------------------------------------------------------------------------------------------------- commands
 
 
-def run(paths, quick: bool) -> int:
+def run(paths, quick: bool, seeds=None) -> int:
+    """Run each config; with ``seeds`` only those, each seed to its own stamped results file."""
+    cfgs = [load_config(p, quick) for p in paths]  # every config checked before the first training
+    jobs = [(cfg, None) for cfg in cfgs] if seeds is None else [
+        (cfg, s) for cfg in cfgs for s in select_seeds(cfg, seeds)]
+    for cfg, seed in jobs:
+        run_one(cfg if seed is None else {**cfg, "seeds": [seed]}, quick, seed)
+    return 0
+
+
+def run_one(cfg: dict, quick: bool, seed: int | None) -> pathlib.Path:
     from jaxgest.runtime.provenance import write_results
 
-    for p in paths:
-        cfg = load_config(p, quick)
-        t0 = time.perf_counter()
+    t0 = time.perf_counter()
+    tag = f"{cfg['name']}{' quick' if quick else ''}{f' s{seed}' if seed is not None else ''}"
 
-        def log(msg, _name=cfg["name"]):
-            print(f"[{_name}{' quick' if quick else ''} {time.perf_counter() - t0:6.0f} s] {msg}", flush=True)
+    def log(msg):
+        print(f"[{tag} {time.perf_counter() - t0:6.0f} s] {msg}", flush=True)
 
-        results = (run_tgst if cfg["model"] == "tgst" else run_zeggs)(cfg, log)
-        results["wall_s"] = round(time.perf_counter() - t0, 1)
-        first = out_dir(cfg) / f"s{cfg['seeds'][0]}" / "config.json"
-        if first.is_file():  # the model's resolved config (preset + overrides), as training wrote it
-            cfg["resolved"] = json.loads(first.read_text()).get("config")
-        results["quick"] = quick
-        command = ["python", "-m", "experiments", "run", cfg["path"]] + (["--quick"] if quick else [])
-        results_path(cfg).parent.mkdir(parents=True, exist_ok=True)
-        dest = write_results(results_path(cfg), results, cfg, shlex.join(command))
-        log(f"wrote {dest.relative_to(REPO)}")
-    return 0
+    results = (run_tgst if cfg["model"] == "tgst" else run_zeggs)(cfg, log)
+    results["wall_s"] = round(time.perf_counter() - t0, 1)
+    first = out_dir(cfg) / f"s{cfg['seeds'][0]}" / "config.json"
+    if first.is_file():  # the model's resolved config (preset + overrides), as training wrote it
+        cfg["resolved"] = json.loads(first.read_text()).get("config")
+    results["quick"] = quick
+    command = (["python", "-m", "experiments", "run", cfg["path"]] + (["--quick"] if quick else [])
+               + (["--seeds", str(seed)] if seed is not None else []))
+    dest = results_path(cfg, seed)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    dest = write_results(dest, results, cfg, shlex.join(command))
+    log(f"wrote {dest.relative_to(REPO)}")
+    return dest
 
 
 def main(argv=None) -> int:
@@ -268,6 +294,8 @@ def main(argv=None) -> int:
     r = sub.add_parser("run", help="train, evaluate and write the stamped results of each config")
     r.add_argument("configs", nargs="+")
     r.add_argument("--quick", action="store_true", help="the config's [quick] replacements (a smoke run)")
+    r.add_argument("--seeds", type=int, nargs="+", metavar="SEED",
+                   help="only these of the config's seeds, each to its own results file <config>.s<SEED>.json")
     t = sub.add_parser("table", help="rewrite README tables from their results files")
     t.add_argument("names", nargs="*", help="table names (default: every table whose results exist)")
     t.add_argument("--quick", action="store_true", help="the tables of the quick results")
@@ -280,7 +308,7 @@ def main(argv=None) -> int:
 
     if a.cmd == "run":
         try:
-            return run(a.configs, a.quick)
+            return run(a.configs, a.quick, a.seeds)
         except (DriverError, JaxgestError) as e:  # bad config or data, a full disk: one line, as the CLI does
             print(f"experiments: {e}", file=sys.stderr)
             return 2

@@ -26,6 +26,7 @@ class Table:
     readme: str            # README holding the table, relative to experiments/
     configs: tuple         # config files, relative to experiments/
     render: Callable       # (list of results dicts, in config order) -> markdown
+    partial: bool = False  # render from the configs that have results while others have none yet
 
 
 def _mean_se(x) -> tuple[float, float]:
@@ -210,26 +211,43 @@ TABLES = {
                                                                     "tgst_evaluation/configs/bucket40.toml"),
                                      render_buckets),
     "zeggs_synthetic.headline": Table("zeggs_synthetic/README.md", ("zeggs_synthetic/configs/small_paper_pose.toml",
-                                                                    "zeggs_synthetic/configs/small.toml"), render_zeggs),
+                                                                    "zeggs_synthetic/configs/small.toml"), render_zeggs,
+                                      partial=True),
 }
 
 MARKER = re.compile(r"<!-- table:(?P<name>[\w.]+)(?P<quick>:quick)? -->\n.*?<!-- /table -->", re.S)
 
 
-def load_results(name: str, quick: bool) -> list | None:
-    """The results of a table's configs (each with its resolved config under ``_config`` and its stamp under
-    ``_stamp``), or None when one is missing."""
+def load_config_results(cfg: dict) -> dict | None:
+    """The results of one config, with its resolved config under ``_config``, its stamps under ``_stamps``, its
+    files under ``_paths`` and the seeds still to run under ``_missing``: the config's own results file, else
+    the one-seed files of ``run --seeds`` merged in the config's seed order (None when there are none)."""
     from jaxgest.runtime.provenance import read_results
 
-    out = []
-    for c in TABLES[name].configs:
-        path = results_path(load_config(ROOT / c, quick))
-        if not path.is_file():
-            return None
-        obj = read_results(path)
-        out.append({**obj["results"], "_config": obj["stamp"]["config"], "_stamp": obj["stamp"],
-                    "_path": path})
-    return out
+    whole = results_path(cfg)
+    if whole.is_file():
+        obj = read_results(whole)
+        return {**obj["results"], "_config": obj["stamp"]["config"], "_stamps": [obj["stamp"]], "_paths": [whole],
+                "_missing": []}
+    parts = [(s, read_results(results_path(cfg, s))) for s in cfg["seeds"] if results_path(cfg, s).is_file()]
+    if not parts:
+        return None
+    merged = {k: v for k, v in parts[0][1]["results"].items() if k not in ("seeds", "wall_s")}
+    merged["seeds"] = {str(s): obj["results"]["seeds"][str(s)] for s, obj in parts}
+    merged["wall_s"] = sum(obj["results"]["wall_s"] for _, obj in parts)
+    config = {**parts[0][1]["stamp"]["config"], "seeds": [s for s, _ in parts]}
+    return {**merged, "_config": config, "_stamps": [obj["stamp"] for _, obj in parts],
+            "_paths": [results_path(cfg, s) for s, _ in parts],
+            "_missing": [s for s in cfg["seeds"] if s not in {p for p, _ in parts}]}
+
+
+def load_results(name: str, quick: bool) -> list | None:
+    """The results of a table's configs (:func:`load_config_results`, in config order), or None when a
+    config has none (for a ``partial`` table: when none has any; the others are left out)."""
+    out = [load_config_results(load_config(ROOT / c, quick)) for c in TABLES[name].configs]
+    if any(r is None for r in out) and not (TABLES[name].partial and any(r is not None for r in out)):
+        return None
+    return [r for r in out if r is not None]
 
 
 def block(name: str, quick: bool) -> str | None:
@@ -238,13 +256,19 @@ def block(name: str, quick: bool) -> str | None:
     if results is None:
         return None
     readme_dir = (ROOT / TABLES[name].readme).parent
-    links = [f"[`{pathlib.Path(r['_path']).name}`]({pathlib.Path(r['_path']).relative_to(readme_dir)})" for r in results]
-    commits = sorted({(r["_stamp"]["commit"] or "unknown")[:10] + ("+dirty" if r["_stamp"]["dirty"] else "")
-                      for r in results})
+    links = [f"[`{p.name}`]({p.relative_to(readme_dir)})" for r in results for p in r["_paths"]]
+    commits = sorted({(st["commit"] or "unknown")[:10] + ("+dirty" if st["dirty"] else "")
+                      for r in results for st in r["_stamps"]})
     walls = ", ".join(f"{r['wall_s'] / 60:.0f} min" if r["wall_s"] >= 120 else f"{r['wall_s']:.0f} s"
                       for r in results)
     label = "Quick smoke run (tiny step counts; not a result)" if quick else "Driver output"
-    words = f"{label}; wall {walls} on 2 shared cores; commit {', '.join(commits)}; results {', '.join(links)}.".split(" ")
+    have = {r["_config"]["name"] for r in results}
+    missing = "; ".join([f"`{r['_config']['name']}` seeds {', '.join(map(str, r['_missing']))} not yet run"
+                         for r in results if r["_missing"]]
+                        + [f"`{pathlib.Path(c).stem}` not yet run" for c in TABLES[name].configs
+                           if pathlib.Path(c).stem not in have])
+    words = (f"{label}; wall {walls} on 2 shared cores; commit {', '.join(commits)}; results {', '.join(links)}."
+             + (f" Partial: {missing}." if missing else "")).split(" ")
     lines, line = [], ""
     for w in words:  # wrap at 110 characters: no README line over 200
         if line and len(line) + 1 + len(w) > 110:
@@ -253,14 +277,15 @@ def block(name: str, quick: bool) -> str | None:
         else:
             line = f"{line} {w}" if line else w
     lines.append(line)
-    paths = [pathlib.Path(r["_stamp"]["config"]["path"]) for r in results]
+    paths = [pathlib.Path(load_config(ROOT / c, quick)["path"]) for c in TABLES[name].configs]
     if len(paths) > 1 and len({p.parent for p in paths}) == 1:
         run_args = f"{paths[0].parent}/{{{','.join(p.stem for p in paths)}}}.toml"
     else:
         run_args = " ".join(str(p) for p in paths)
     flag = " --quick" if quick else ""
     tail = ("\n\n" + "\n".join(lines) + "\n\n"
-            f"    python -m experiments run {run_args}{flag}\n    python -m experiments table {name}{flag}")
+            f"    python -m experiments run {run_args}{flag}{'   # or one seed at a time: --seeds N' if missing else ''}\n"
+            f"    python -m experiments table {name}{flag}")
     return (f"<!-- table:{name}{':quick' if quick else ''} -->\n{TABLES[name].render(results)}{tail}\n"
             "<!-- /table -->")
 

@@ -104,3 +104,68 @@ def test_readmes_stay_an_index():
     for readme in [root, EXPERIMENTS / "README.md", *sorted(EXPERIMENTS.glob("*/README.md"))]:
         long = [i + 1 for i, line in enumerate(readme.read_text().splitlines()) if len(line) > 200]
         assert not long, f"{readme}: lines {long} over 200 characters"
+
+
+def _fake_config(tmp_path, seeds=(0, 1, 2)):
+    return {"name": "small", "experiment": "zeggs_x", "quick": False, "seeds": list(seeds), "model": "zeggs",
+            "path": "experiments/zeggs_x/configs/small.toml"}
+
+
+def test_seed_files_accumulate_and_merge(tmp_path, monkeypatch):
+    """``run --seeds`` writes one stamped file per seed; the table merges them in the config's seed order,
+    names the seeds still missing, and the config's whole results file wins once it exists."""
+    from jaxgest.runtime.provenance import write_results
+
+    monkeypatch.setattr(driver, "ROOT", tmp_path)
+    cfg = _fake_config(tmp_path)
+    assert driver.results_path(cfg, 2).name == "small.s2.json"
+    assert driver.results_path({**cfg, "quick": True}, 0).name == "small.quick.s0.json"
+    assert tables.load_config_results(cfg) is None
+    for s, wall in ((2, 30.0), (0, 10.0)):
+        dest = driver.results_path(cfg, s)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        write_results(dest, {"seeds": {str(s): {"probe": s}}, "wall_s": wall}, {**cfg, "seeds": [s]},
+                      f"python -m experiments run {cfg['path']} --seeds {s}")
+    res = tables.load_config_results(cfg)
+    assert list(res["seeds"]) == ["0", "2"] and res["seeds"]["2"] == {"probe": 2}
+    assert res["_missing"] == [1] and res["wall_s"] == 40.0 and res["_config"]["seeds"] == [0, 2]
+    assert [p.name for p in res["_paths"]] == ["small.s0.json", "small.s2.json"]
+    assert all(st["command"].endswith(f"--seeds {s}") for st, s in zip(res["_stamps"], (0, 2)))
+    write_results(driver.results_path(cfg), {"seeds": {str(s): {"probe": 9} for s in range(3)}, "wall_s": 5.0},
+                  cfg, f"python -m experiments run {cfg['path']}")
+    whole = tables.load_config_results(cfg)
+    assert whole["_missing"] == [] and whole["seeds"]["1"] == {"probe": 9} and len(whole["_paths"]) == 1
+
+
+def test_unknown_seed_is_one_line(capsys):
+    path = next(c for c in CONFIGS if c.parent.parent.name == "zeggs_synthetic")
+    assert driver.main(["run", str(path), "--seeds", "0", "77"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "seed 77 is not among the config's seeds" in err[0]
+    cfg = driver.load_config(path)
+    assert driver.select_seeds(cfg, [cfg["seeds"][-1], cfg["seeds"][0]]) == [cfg["seeds"][0], cfg["seeds"][-1]]
+
+
+def test_partial_table_names_what_is_missing(monkeypatch):
+    """A ``partial`` table renders from the configs that have results and says which seeds and configs are
+    still to run; a table that is not ``partial`` waits for all of its configs."""
+    name = "zeggs_synthetic.headline"
+    t = tables.TABLES[name]
+    assert t.partial
+    real = tables.load_config_results
+    full = [real(driver.load_config(EXPERIMENTS / c, True)) for c in t.configs]
+    if any(r is None for r in full):
+        pytest.skip("no quick results to build a partial table from")
+
+    def one_seed_of_the_last(cfg):
+        r = real(cfg)
+        if cfg["name"] != full[-1]["_config"]["name"]:
+            return None
+        return {**r, "_missing": [5, 6]}
+
+    monkeypatch.setattr(tables, "load_config_results", one_seed_of_the_last)
+    text = " ".join(tables.block(name, True).split())  # the stamp line is wrapped
+    assert "seeds 5, 6 not yet run" in text and f"`{full[0]['_config']['name']}` not yet run" in text
+    assert text.count("| `") == len(full[-1]["seeds"])  # rows of the config that has results only
+    monkeypatch.setattr(tables, "TABLES", {**tables.TABLES, name: tables.Table(t.readme, t.configs, t.render)})
+    assert tables.block(name, True) is None

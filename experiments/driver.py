@@ -2,6 +2,7 @@
 
     python -m experiments run CONFIG... [--quick]     train (resumes), evaluate, write results/<config>[.quick].json
     python -m experiments run CONFIG... --seeds 0 1   only those seeds, one results file each: <config>.s0.json ...
+    python -m experiments merge CONFIG... [--quick]   every seed file of a config -> its whole results file
     python -m experiments table NAME [--quick]         rewrite the README tables NAME from their results files
     python -m experiments table --check                 exit 1 when a README table differs from its results
     python -m experiments list                         configs and tables
@@ -14,7 +15,8 @@ process per ``run`` so the seeds of a config share compiled programs. Workdirs g
 the results file is written with :func:`jaxgest.runtime.provenance.write_results` (commit, version, resolved config,
 command) to ``experiments/<experiment>/results/``. With ``--seeds`` each seed gets its own stamped file
 (``<config>[.quick].s<seed>.json``), so a config's trainings can accumulate over several sessions; the tables
-merge them (:func:`experiments.tables.load_results`) until the whole config's file exists.
+merge them (:func:`experiments.tables.load_results`) until ``merge`` folds them into the config's whole file,
+which keeps each seed file's stamp under ``parts``.
 """
 
 from __future__ import annotations
@@ -288,6 +290,36 @@ def run_one(cfg: dict, quick: bool, seed: int | None) -> pathlib.Path:
     return dest
 
 
+def merge(paths, quick: bool) -> int:
+    """Fold the one-seed results files of each config (every seed of the config) into its whole results file,
+    stamped with this command, each seed file's stamp kept under ``results["parts"]``; the seed files are
+    removed once the whole file is written."""
+    from jaxgest.runtime.provenance import read_results, write_results
+
+    cfgs = [load_config(p, quick) for p in paths]
+    for cfg in cfgs:
+        missing = [s for s in cfg["seeds"] if not results_path(cfg, s).is_file()]
+        if missing:
+            raise DriverError(f"{cfg['path']}: seeds {', '.join(map(str, missing))} have no results file yet "
+                              f"(python -m experiments run {cfg['path']}{' --quick' if quick else ''} --seeds "
+                              f"{' '.join(map(str, missing))})")
+    for cfg in cfgs:
+        files = [results_path(cfg, s) for s in cfg["seeds"]]
+        parts = [read_results(f) for f in files]
+        results = {k: v for k, v in parts[0]["results"].items() if k not in ("seeds", "wall_s")}
+        results["seeds"] = {str(s): obj["results"]["seeds"][str(s)] for s, obj in zip(cfg["seeds"], parts)}
+        results["wall_s"] = round(sum(obj["results"]["wall_s"] for obj in parts), 1)
+        results["parts"] = [{"file": f.name, **{k: v for k, v in obj["stamp"].items() if k != "config"}}
+                            for f, obj in zip(files, parts)]
+        cfg["resolved"] = parts[0]["stamp"]["config"].get("resolved")
+        command = ["python", "-m", "experiments", "merge", cfg["path"]] + (["--quick"] if quick else [])
+        dest = write_results(results_path(cfg), results, cfg, shlex.join(command))
+        for f in files:
+            f.unlink()
+        print(f"{cfg['name']}: {len(files)} seed files merged into {dest}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m experiments", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -296,6 +328,9 @@ def main(argv=None) -> int:
     r.add_argument("--quick", action="store_true", help="the config's [quick] replacements (a smoke run)")
     r.add_argument("--seeds", type=int, nargs="+", metavar="SEED",
                    help="only these of the config's seeds, each to its own results file <config>.s<SEED>.json")
+    m = sub.add_parser("merge", help="fold a config's one-seed results files into its whole results file")
+    m.add_argument("configs", nargs="+")
+    m.add_argument("--quick", action="store_true", help="the seed files of --quick runs")
     t = sub.add_parser("table", help="rewrite README tables from their results files")
     t.add_argument("names", nargs="*", help="table names (default: every table whose results exist)")
     t.add_argument("--quick", action="store_true", help="the tables of the quick results")
@@ -306,9 +341,9 @@ def main(argv=None) -> int:
 
     from jaxgest.runtime.errors import JaxgestError
 
-    if a.cmd == "run":
+    if a.cmd in ("run", "merge"):
         try:
-            return run(a.configs, a.quick, a.seeds)
+            return run(a.configs, a.quick, a.seeds) if a.cmd == "run" else merge(a.configs, a.quick)
         except (DriverError, JaxgestError) as e:  # bad config or data, a full disk: one line, as the CLI does
             print(f"experiments: {e}", file=sys.stderr)
             return 2

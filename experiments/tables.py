@@ -220,14 +220,16 @@ MARKER = re.compile(r"<!-- table:(?P<name>[\w.]+)(?P<quick>:quick)? -->\n.*?<!--
 
 def load_config_results(cfg: dict) -> dict | None:
     """The results of one config, with its resolved config under ``_config``, its stamps under ``_stamps``, its
-    files under ``_paths`` and the seeds still to run under ``_missing``: the config's own results file, else
+    files under ``_paths`` and the seeds still to run under ``_missing``: the config's own results file (for one
+    written by ``merge``, the stamps of the runs it holds), else
     the one-seed files of ``run --seeds`` merged in the config's seed order (None when there are none)."""
     from jaxgest.runtime.provenance import read_results
 
     whole = results_path(cfg)
     if whole.is_file():
         obj = read_results(whole)
-        return {**obj["results"], "_config": obj["stamp"]["config"], "_stamps": [obj["stamp"]], "_paths": [whole],
+        stamps = obj["results"].get("parts") or [obj["stamp"]]  # merged seed files: the stamps of their runs
+        return {**obj["results"], "_config": obj["stamp"]["config"], "_stamps": stamps, "_paths": [whole],
                 "_missing": []}
     parts = [(s, read_results(results_path(cfg, s))) for s in cfg["seeds"] if results_path(cfg, s).is_file()]
     if not parts:

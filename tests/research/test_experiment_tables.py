@@ -106,35 +106,45 @@ def test_readmes_stay_an_index():
         assert not long, f"{readme}: lines {long} over 200 characters"
 
 
-def _fake_config(tmp_path, seeds=(0, 1, 2)):
-    return {"name": "small", "experiment": "zeggs_x", "quick": False, "seeds": list(seeds), "model": "zeggs",
-            "path": "experiments/zeggs_x/configs/small.toml"}
+def _write_seed(cfg, s, wall):
+    from jaxgest.runtime.provenance import write_results
+
+    dest = driver.results_path(cfg, s)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    write_results(dest, {"seeds": {str(s): {"probe": s}}, "wall_s": wall, "quick": False}, {**cfg, "seeds": [s]},
+                  f"python -m experiments run {cfg['path']} --seeds {s}")
 
 
 def test_seed_files_accumulate_and_merge(tmp_path, monkeypatch):
-    """``run --seeds`` writes one stamped file per seed; the table merges them in the config's seed order,
-    names the seeds still missing, and the config's whole results file wins once it exists."""
-    from jaxgest.runtime.provenance import write_results
-
+    """``run --seeds`` writes one stamped file per seed; the table merges them in the config's seed order and
+    names the seeds still missing; ``merge`` refuses while a seed is missing, then folds them into the config's
+    whole file (which keeps each seed file's stamp) and removes them."""
     monkeypatch.setattr(driver, "ROOT", tmp_path)
-    cfg = _fake_config(tmp_path)
+    (tmp_path / "zeggs_x" / "configs").mkdir(parents=True)
+    path = tmp_path / "zeggs_x" / "configs" / "small.toml"
+    path.write_text('table = []\nmodel = "zeggs"\npreset = "small"\nseeds = [0, 1, 2]\n')
+    cfg = driver.load_config(path)
     assert driver.results_path(cfg, 2).name == "small.s2.json"
     assert driver.results_path({**cfg, "quick": True}, 0).name == "small.quick.s0.json"
     assert tables.load_config_results(cfg) is None
-    for s, wall in ((2, 30.0), (0, 10.0)):
-        dest = driver.results_path(cfg, s)
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        write_results(dest, {"seeds": {str(s): {"probe": s}}, "wall_s": wall}, {**cfg, "seeds": [s]},
-                      f"python -m experiments run {cfg['path']} --seeds {s}")
+    _write_seed(cfg, 2, 30.0)
+    _write_seed(cfg, 0, 10.0)
     res = tables.load_config_results(cfg)
     assert list(res["seeds"]) == ["0", "2"] and res["seeds"]["2"] == {"probe": 2}
     assert res["_missing"] == [1] and res["wall_s"] == 40.0 and res["_config"]["seeds"] == [0, 2]
     assert [p.name for p in res["_paths"]] == ["small.s0.json", "small.s2.json"]
     assert all(st["command"].endswith(f"--seeds {s}") for st, s in zip(res["_stamps"], (0, 2)))
-    write_results(driver.results_path(cfg), {"seeds": {str(s): {"probe": 9} for s in range(3)}, "wall_s": 5.0},
-                  cfg, f"python -m experiments run {cfg['path']}")
+    with pytest.raises(driver.DriverError, match="seeds 1 have no results file yet"):
+        driver.merge([path], False)
+    assert driver.results_path(cfg, 0).is_file()  # nothing removed by a refused merge
+    _write_seed(cfg, 1, 20.0)
+    assert driver.merge([path], False) == 0
+    assert not any(driver.results_path(cfg, s).is_file() for s in range(3))
     whole = tables.load_config_results(cfg)
-    assert whole["_missing"] == [] and whole["seeds"]["1"] == {"probe": 9} and len(whole["_paths"]) == 1
+    assert whole["_missing"] == [] and whole["seeds"] == {str(s): {"probe": s} for s in range(3)}
+    assert whole["wall_s"] == 60.0 and [p.name for p in whole["_paths"]] == ["small.json"]
+    assert [st["command"].split()[-1] for st in whole["_stamps"]] == ["0", "1", "2"]  # the runs' own stamps
+    assert [st["file"] for st in whole["_stamps"]] == [f"small.s{s}.json" for s in range(3)]
 
 
 def test_unknown_seed_is_one_line(capsys):

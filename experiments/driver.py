@@ -34,6 +34,7 @@ import tomllib
 ROOT = pathlib.Path(__file__).resolve().parent
 REPO = ROOT.parent
 TGST_METHODS = ("soft", "hard", "adain", "avatarnet", "autoencoder")
+RUN_FIELDS = ("model", "preset", "overrides", "train", "data", "protocol")  # what a run of a config depends on
 
 
 class DriverError(Exception):
@@ -90,6 +91,14 @@ def select_seeds(cfg: dict, seeds) -> list:
     if unknown:
         raise DriverError(f"{cfg['path']}: seed {unknown[0]} is not among the config's seeds {cfg['seeds']}")
     return [s for s in cfg["seeds"] if s in seeds]
+
+
+def check_seed_file(cfg: dict, path, ran: dict) -> None:
+    """A :class:`DriverError` unless the seed file ``path`` (stamped config ``ran``) ran the config as it
+    stands: a changed config needs its seeds rerun before they are merged."""
+    changed = [k for k in RUN_FIELDS if ran.get(k) != cfg.get(k)]
+    if changed:
+        raise DriverError(f"{path}: ran another {', '.join(changed)} than {cfg['path']} has now; rerun that seed")
 
 
 def out_dir(cfg: dict) -> pathlib.Path:
@@ -303,6 +312,8 @@ def merge(paths, quick: bool) -> int:
             raise DriverError(f"{cfg['path']}: seeds {', '.join(map(str, missing))} have no results file yet "
                               f"(python -m experiments run {cfg['path']}{' --quick' if quick else ''} --seeds "
                               f"{' '.join(map(str, missing))})")
+        for s in cfg["seeds"]:
+            check_seed_file(cfg, results_path(cfg, s), read_results(results_path(cfg, s))["stamp"]["config"])
     for cfg in cfgs:
         files = [results_path(cfg, s) for s in cfg["seeds"]]
         parts = [read_results(f) for f in files]

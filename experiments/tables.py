@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from experiments.driver import REPO, ROOT, DriverError, load_config, results_path
+from experiments.driver import REPO, ROOT, DriverError, check_seed_file, load_config, results_path
 
 METHOD_LABELS = {"soft": "soft", "hard": "hard", "avatarnet": "Avatar-net", "adain": "AdaIN",
                  "autoencoder": "round trip", "content_as_is": "content as is", "style_as_is": "style as is"}
@@ -234,6 +234,8 @@ def load_config_results(cfg: dict) -> dict | None:
     parts = [(s, read_results(results_path(cfg, s))) for s in cfg["seeds"] if results_path(cfg, s).is_file()]
     if not parts:
         return None
+    for s, obj in parts:
+        check_seed_file(cfg, results_path(cfg, s), obj["stamp"]["config"])
     merged = {k: v for k, v in parts[0][1]["results"].items() if k not in ("seeds", "wall_s")}
     merged["seeds"] = {str(s): obj["results"]["seeds"][str(s)] for s, obj in parts}
     merged["wall_s"] = sum(obj["results"]["wall_s"] for _, obj in parts)

@@ -137,6 +137,11 @@ def test_seed_files_accumulate_and_merge(tmp_path, monkeypatch):
     with pytest.raises(driver.DriverError, match="seeds 1 have no results file yet"):
         driver.merge([path], False)
     assert driver.results_path(cfg, 0).is_file()  # nothing removed by a refused merge
+    _write_seed({**cfg, "train": {"steps": 10}}, 1, 20.0)  # a seed that ran another version of the config
+    with pytest.raises(driver.DriverError, match="small.s1.json: ran another train than"):
+        driver.merge([path], False)
+    with pytest.raises(driver.DriverError, match="small.s1.json: ran another train than"):
+        tables.load_config_results(cfg)
     _write_seed(cfg, 1, 20.0)
     assert driver.merge([path], False) == 0
     assert not any(driver.results_path(cfg, s).is_file() for s in range(3))

@@ -93,12 +93,24 @@ def select_seeds(cfg: dict, seeds) -> list:
     return [s for s in cfg["seeds"] if s in seeds]
 
 
-def check_seed_file(cfg: dict, path, ran: dict) -> None:
-    """A :class:`DriverError` unless the seed file ``path`` (stamped config ``ran``) ran the config as it
-    stands: a changed config needs its seeds rerun before they are merged."""
+def check_ran(cfg: dict, path, ran: dict) -> None:
+    """A :class:`DriverError` unless the results file ``path`` (stamped config ``ran``) ran the config as it
+    stands: after a config's run fields change, its results are rerun (remove the workdir
+    ``out/<config>/s<seed>`` first: a rerun resumes from its checkpoints)."""
     changed = [k for k in RUN_FIELDS if ran.get(k) != cfg.get(k)]
     if changed:
-        raise DriverError(f"{path}: ran another {', '.join(changed)} than {cfg['path']} has now; rerun that seed")
+        raise DriverError(f"{path}: ran another {', '.join(changed)} than {cfg['path']} has now; rerun it "
+                          f"(remove its workdir under {out_dir(cfg).relative_to(ROOT)} first)")
+
+
+def seed_files(cfg: dict) -> list:
+    """The one-seed results files of ``cfg`` that exist, in the config's seed order."""
+    return [results_path(cfg, s) for s in cfg["seeds"] if results_path(cfg, s).is_file()]
+
+
+def first_of(parts: list, key: str):
+    """``key`` of the first results dict in ``parts`` that has it (a part computed once per config)."""
+    return next((r[key] for r in parts if key in r), None)
 
 
 def out_dir(cfg: dict) -> pathlib.Path:
@@ -157,7 +169,7 @@ def compact_tgst_report(rep: dict) -> dict:
     }
 
 
-def run_tgst(cfg: dict, log) -> dict:
+def run_tgst(cfg: dict, log, once: bool = True) -> dict:
     from jaxgest.tgst.evaluate import evaluate, metric_validity
     from jaxgest.tgst.trainer import train
 
@@ -193,7 +205,7 @@ def run_tgst(cfg: dict, log) -> dict:
             per["wall_s"][f"eval_{pairs}"] = round(time.perf_counter() - t0, 1)
             log(f"seed {seed}: {pairs} pairs evaluated in {per['wall_s'][f'eval_{pairs}']:.0f} s")
         out["seeds"][str(seed)] = per
-    if pr.get("validity"):  # Table 1: model-free, once per config
+    if pr.get("validity") and once:  # Table 1: model-free, once per config (with --seeds: its first seed)
         out["metric_validity"] = metric_validity(str(eval_dir), pairs="inter", trim_seconds=pr.get("trim"),
                                                  progress=False)
     return out
@@ -229,7 +241,7 @@ def compact_zeggs_report(rep: dict) -> dict:
     return out
 
 
-def run_zeggs(cfg: dict, log) -> dict:
+def run_zeggs(cfg: dict, log, once: bool = True) -> dict:
     from jaxgest.zeggs.evaluate import evaluate
     from jaxgest.zeggs.trainer import train
 
@@ -271,11 +283,14 @@ def run(paths, quick: bool, seeds=None) -> int:
     jobs = [(cfg, None) for cfg in cfgs] if seeds is None else [
         (cfg, s) for cfg in cfgs for s in select_seeds(cfg, seeds)]
     for cfg, seed in jobs:
-        run_one(cfg if seed is None else {**cfg, "seeds": [seed]}, quick, seed)
+        run_one(cfg if seed is None else {**cfg, "seeds": [seed]}, quick, seed,
+                once=seed is None or seed == cfg["seeds"][0])
     return 0
 
 
-def run_one(cfg: dict, quick: bool, seed: int | None) -> pathlib.Path:
+def run_one(cfg: dict, quick: bool, seed: int | None, once: bool = True) -> pathlib.Path:
+    """One config (``seed`` None: all its seeds) to its stamped results file; ``once``: also the parts
+    computed once per config (TGST's Table 1)."""
     from jaxgest.runtime.provenance import write_results
 
     t0 = time.perf_counter()
@@ -284,7 +299,7 @@ def run_one(cfg: dict, quick: bool, seed: int | None) -> pathlib.Path:
     def log(msg):
         print(f"[{tag} {time.perf_counter() - t0:6.0f} s] {msg}", flush=True)
 
-    results = (run_tgst if cfg["model"] == "tgst" else run_zeggs)(cfg, log)
+    results = (run_tgst if cfg["model"] == "tgst" else run_zeggs)(cfg, log, once)
     results["wall_s"] = round(time.perf_counter() - t0, 1)
     first = out_dir(cfg) / f"s{cfg['seeds'][0]}" / "config.json"
     if first.is_file():  # the model's resolved config (preset + overrides), as training wrote it
@@ -307,17 +322,21 @@ def merge(paths, quick: bool) -> int:
 
     cfgs = [load_config(p, quick) for p in paths]
     for cfg in cfgs:
+        if results_path(cfg).is_file():
+            raise DriverError(f"{results_path(cfg)}: exists; merging would replace it (remove it first to merge "
+                              f"{len(seed_files(cfg))} seed file(s))")
         missing = [s for s in cfg["seeds"] if not results_path(cfg, s).is_file()]
         if missing:
             raise DriverError(f"{cfg['path']}: seeds {', '.join(map(str, missing))} have no results file yet "
                               f"(python -m experiments run {cfg['path']}{' --quick' if quick else ''} --seeds "
                               f"{' '.join(map(str, missing))})")
         for s in cfg["seeds"]:
-            check_seed_file(cfg, results_path(cfg, s), read_results(results_path(cfg, s))["stamp"]["config"])
+            check_ran(cfg, results_path(cfg, s), read_results(results_path(cfg, s))["stamp"]["config"])
     for cfg in cfgs:
         files = [results_path(cfg, s) for s in cfg["seeds"]]
         parts = [read_results(f) for f in files]
-        results = {k: v for k, v in parts[0]["results"].items() if k not in ("seeds", "wall_s")}
+        results = {k: first_of([o["results"] for o in parts], k) for o in parts for k in o["results"]
+                   if k not in ("seeds", "wall_s")}
         results["seeds"] = {str(s): obj["results"]["seeds"][str(s)] for s, obj in zip(cfg["seeds"], parts)}
         results["wall_s"] = round(sum(obj["results"]["wall_s"] for obj in parts), 1)
         results["parts"] = [{"file": f.name, **{k: v for k, v in obj["stamp"].items() if k != "config"}}

@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from experiments.driver import REPO, ROOT, DriverError, check_seed_file, load_config, results_path
+from experiments.driver import REPO, ROOT, DriverError, check_ran, first_of, load_config, results_path, seed_files
 
 METHOD_LABELS = {"soft": "soft", "hard": "hard", "avatarnet": "Avatar-net", "adain": "AdaIN",
                  "autoencoder": "round trip", "content_as_is": "content as is", "style_as_is": "style as is"}
@@ -227,7 +227,11 @@ def load_config_results(cfg: dict) -> dict | None:
 
     whole = results_path(cfg)
     if whole.is_file():
+        if seed_files(cfg):
+            raise DriverError(f"{whole}: seed files {', '.join(p.name for p in seed_files(cfg))} lie beside it; "
+                              "remove them, or remove it and merge them")
         obj = read_results(whole)
+        check_ran(cfg, whole, obj["stamp"]["config"])
         stamps = obj["results"].get("parts") or [obj["stamp"]]  # merged seed files: the stamps of their runs
         return {**obj["results"], "_config": obj["stamp"]["config"], "_stamps": stamps, "_paths": [whole],
                 "_missing": []}
@@ -235,8 +239,9 @@ def load_config_results(cfg: dict) -> dict | None:
     if not parts:
         return None
     for s, obj in parts:
-        check_seed_file(cfg, results_path(cfg, s), obj["stamp"]["config"])
-    merged = {k: v for k, v in parts[0][1]["results"].items() if k not in ("seeds", "wall_s")}
+        check_ran(cfg, results_path(cfg, s), obj["stamp"]["config"])
+    merged = {k: first_of([o["results"] for _, o in parts], k) for _, o in parts for k in o["results"]
+              if k not in ("seeds", "wall_s")}
     merged["seeds"] = {str(s): obj["results"]["seeds"][str(s)] for s, obj in parts}
     merged["wall_s"] = sum(obj["results"]["wall_s"] for _, obj in parts)
     config = {**parts[0][1]["stamp"]["config"], "seeds": [s for s, _ in parts]}

@@ -161,26 +161,52 @@ def test_unknown_seed_is_one_line(capsys):
     assert driver.select_seeds(cfg, [cfg["seeds"][-1], cfg["seeds"][0]]) == [cfg["seeds"][0], cfg["seeds"][-1]]
 
 
-def test_partial_table_names_what_is_missing(monkeypatch):
+def _config_file(root, name, seeds):
+    (root / "zeggs_x" / "configs").mkdir(parents=True, exist_ok=True)
+    path = root / "zeggs_x" / "configs" / f"{name}.toml"
+    path.write_text(f'table = []\nmodel = "zeggs"\npreset = "small"\nseeds = {list(seeds)}\n')
+    return path
+
+
+def test_partial_table_names_what_is_missing(tmp_path, monkeypatch):
     """A ``partial`` table renders from the configs that have results and says which seeds and configs are
-    still to run; a table that is not ``partial`` waits for all of its configs."""
-    name = "zeggs_synthetic.headline"
-    t = tables.TABLES[name]
-    assert t.partial
-    real = tables.load_config_results
-    full = [real(driver.load_config(EXPERIMENTS / c, True)) for c in t.configs]
-    if any(r is None for r in full):
-        pytest.skip("no quick results to build a partial table from")
+    still to run; a table that is not ``partial`` waits for all of its configs; a whole results file with seed
+    files beside it, or a merge over an existing whole file, is refused."""
+    monkeypatch.setattr(driver, "ROOT", tmp_path)
+    monkeypatch.setattr(tables, "ROOT", tmp_path)
+    a, b = _config_file(tmp_path, "a", [0, 1]), _config_file(tmp_path, "b", [0, 1, 2])
+    rows = lambda results: "\n".join(f"| `{r['_config']['name']}` | {s} |" for r in results for s in r["seeds"])
+    name = "zeggs_x.headline"
+    configs = ("zeggs_x/configs/a.toml", "zeggs_x/configs/b.toml")
+    monkeypatch.setattr(tables, "TABLES", {name: tables.Table("zeggs_x/README.md", configs, rows, partial=True)})
+    assert tables.block(name, False) is None
+    cfg_b = driver.load_config(b)
+    _write_seed(cfg_b, 1, 10.0)
+    text = " ".join(tables.block(name, False).split())  # the stamp line is wrapped
+    assert "`b` seeds 0, 2 not yet run" in text and "`a` not yet run" in text and "--seeds N" in text
+    assert "| `b` | 1 |" in text and "| `a`" not in text and "small" not in text
+    monkeypatch.setattr(tables, "TABLES", {name: tables.Table("zeggs_x/README.md", configs, rows)})
+    assert tables.block(name, False) is None
+    for s in (0, 2):
+        _write_seed(cfg_b, s, 10.0)
+    assert driver.merge([b], False) == 0
+    _write_seed(cfg_b, 1, 10.0)  # a stale seed file beside the merged whole file
+    with pytest.raises(driver.DriverError, match="b.s1.json lie beside it"):
+        tables.load_config_results(cfg_b)
+    with pytest.raises(driver.DriverError, match="b.json: exists; merging would replace it"):
+        driver.merge([b], False)
+    assert driver.load_config(a)["seeds"] == [0, 1]
 
-    def one_seed_of_the_last(cfg):
-        r = real(cfg)
-        if cfg["name"] != full[-1]["_config"]["name"]:
-            return None
-        return {**r, "_missing": [5, 6]}
 
-    monkeypatch.setattr(tables, "load_config_results", one_seed_of_the_last)
-    text = " ".join(tables.block(name, True).split())  # the stamp line is wrapped
-    assert "seeds 5, 6 not yet run" in text and f"`{full[0]['_config']['name']}` not yet run" in text
-    assert text.count("| `") == len(full[-1]["seeds"])  # rows of the config that has results only
-    monkeypatch.setattr(tables, "TABLES", {**tables.TABLES, name: tables.Table(t.readme, t.configs, t.render)})
-    assert tables.block(name, True) is None
+def test_seeds_run_config_wide_parts_once(tmp_path, monkeypatch):
+    """``--seeds`` runs the selected seeds in the config's order, each on its own; the parts computed once per
+    config (TGST's Table 1) go with the config's first seed only, and merging keeps them."""
+    path = _config_file(tmp_path, "c", [3, 1, 4])
+    calls = []
+    monkeypatch.setattr(driver, "run_one", lambda cfg, quick, seed, once=True: calls.append((cfg["seeds"], seed, once)))
+    assert driver.run([path], False, [4, 3]) == 0
+    assert calls == [([3], 3, True), ([4], 4, False)]
+    calls.clear()
+    assert driver.run([path], False, None) == 0
+    assert calls == [([3, 1, 4], None, True)]
+    assert driver.first_of([{"x": 1}, {"v": 2}, {"v": 3}], "v") == 2 and driver.first_of([{}], "v") is None

@@ -2,7 +2,7 @@
 # ZeroEGGS's claims on the generated motion (issue 37). Usage, from anywhere:
 #   experiments/zeggs_claims/run.sh [RUN...]     # default: the 9 runs of runs.tsv that are not pilots
 # Per run: trains out/RUN (resumes; skipped when done), then `jaxgest zeggs evaluate --claims` on the 8
-# held-out script datasets and the real speech -> out/claims_RUN.json (stamped) and out/claims_RUN.md.
+# held-out script datasets and the real speech -> results/claims_RUN.json (stamped) and out/claims_RUN.md.
 # Data (written once): out/data = jaxgest synth --seed 0 (training scripts), out/heldout/seedK, K = 1..8.
 # Environment: PYTHON (default python), HELDOUT (default 8), SHARED (default: ../shared beside the repo),
 # LEVER (default "small_s1 zs_tense_s0 zs_sad_s0"): runs also evaluated with --style-scale 2 (the lever);
@@ -14,7 +14,7 @@ PY="${PYTHON:-python}"; OUT="$HERE/out"; HELDOUT="${HELDOUT:-8}"
 SHARED="${SHARED:-$ROOT/../shared}"; SPEECH_DIR="$SHARED/data/speech-gesture"
 J=("$PY" -m jaxgest.cli)
 export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
-mkdir -p "$OUT"
+mkdir -p "$OUT" "$HERE/results"
 [ -f "$OUT/data/manifest.csv" ] || "${J[@]}" synth --out "$OUT/data" --seed 0 > /dev/null
 held=()
 for k in $(seq 1 "$HELDOUT"); do
@@ -35,11 +35,11 @@ one_run() {
   t=$(date +%s); echo "$name: trained in $(( t - s )) s ($steps steps)"
   sp=(); [ ${#speech[@]} -eq 0 ] || sp=(--speech "${speech[@]}")
   "${J[@]}" zeggs evaluate --workdir "$OUT/$name" --data "$OUT/data" --claims --heldout "${held[@]}" "${sp[@]}" \
-      --json "$OUT/claims_$name.json" > "$OUT/claims_$name.md"
+      --json "$HERE/results/claims_$name.json" > "$OUT/claims_$name.md"
   echo "$name: evaluated in $(( $(date +%s) - t )) s"
   if [[ " $LEVER " == *" $name "* ]]; then  # the lever (README): the same model, style embeddings x 2
     "${J[@]}" zeggs evaluate --workdir "$OUT/$name" --data "$OUT/data" --claims --heldout "${held[@]}" \
-        --style-scale 2 --json "$OUT/claims_${name}_scale2.json" > "$OUT/claims_${name}_scale2.md"
+        --style-scale 2 --json "$HERE/results/claims_${name}_scale2.json" > "$OUT/claims_${name}_scale2.md"
     echo "$name: lever (--style-scale 2) evaluated"
   fi
 }

@@ -1,6 +1,7 @@
 """The experiment driver: a config file in, a stamped results file out.
 
-    python -m experiments run CONFIG... [--quick]     train (resumes), evaluate, write results/<config>[.quick].json
+    python -m experiments run CONFIG... [--quick]     train (resumes), evaluate, write results/<config>[.quick].json,
+                                                      rewrite the README tables the configs feed
     python -m experiments run CONFIG... --seeds 0 1   only those seeds, one results file each: <config>.s0.json ...
     python -m experiments merge CONFIG... [--quick]   every seed file of a config -> its whole results file
     python -m experiments table NAME [--quick]         rewrite the README tables NAME from their results files
@@ -285,7 +286,18 @@ def run(paths, quick: bool, seeds=None) -> int:
     for cfg, seed in jobs:
         run_one(cfg if seed is None else {**cfg, "seeds": [seed]}, quick, seed,
                 once=seed is None or seed == cfg["seeds"][0])
+    rewrite_tables(cfgs, quick)
     return 0
+
+
+def rewrite_tables(cfgs, quick: bool) -> None:
+    """Rewrite the README tables the configs feed, each once its configs' results are at hand."""
+    from experiments import tables
+
+    names = dict.fromkeys(n for cfg in cfgs for n in cfg["table"])
+    for name in names:
+        if name in tables.TABLES and tables.load_results(name, quick) is not None:
+            tables.update([name], quick)
 
 
 def run_one(cfg: dict, quick: bool, seed: int | None, once: bool = True) -> pathlib.Path:

@@ -340,5 +340,6 @@ def update(names, quick: bool = False) -> int:
         else:
             text = text.rstrip("\n") + "\n\n" + new + "\n"
         readme.write_text(text)
-        print(f"{name}{' (quick)' if quick else ''}: written to {readme.relative_to(REPO)}")
+        shown = readme.relative_to(REPO) if readme.is_relative_to(REPO) else readme
+        print(f"{name}{' (quick)' if quick else ''}: written to {shown}")
     return 0

@@ -210,3 +210,22 @@ def test_seeds_run_config_wide_parts_once(tmp_path, monkeypatch):
     assert driver.run([path], False, None) == 0
     assert calls == [([3, 1, 4], None, True)]
     assert driver.first_of([{"x": 1}, {"v": 2}, {"v": 3}], "v") == 2 and driver.first_of([{}], "v") is None
+
+
+def test_run_rewrites_the_tables_its_configs_feed(tmp_path, monkeypatch):
+    """One command regenerates a README table: ``run`` rewrites each table its configs feed once their
+    results are at hand (here a partial table after one seed)."""
+    monkeypatch.setattr(driver, "ROOT", tmp_path)
+    monkeypatch.setattr(tables, "ROOT", tmp_path)
+    path = _config_file(tmp_path, "d", [0, 1])
+    path.write_text(path.read_text().replace("table = []", 'table = ["zeggs_x.t"]'))
+    readme = tmp_path / "zeggs_x" / "README.md"
+    readme.write_text("# x\n\n<!-- table:zeggs_x.t -->\nold\n<!-- /table -->\n\nafter\n")
+    rows = lambda results: "\n".join(f"| `{r['_config']['name']}` | {s} |" for r in results for s in r["seeds"])
+    monkeypatch.setattr(tables, "TABLES", {"zeggs_x.t": tables.Table("zeggs_x/README.md", ("zeggs_x/configs/d.toml",),
+                                                                     rows, partial=True)})
+    monkeypatch.setattr(driver, "run_one", lambda cfg, quick, seed, once=True: _write_seed(cfg, seed, 1.0))
+    assert driver.run([path], False, [1]) == 0
+    text = readme.read_text()
+    assert "| `d` | 1 |" in text and "old" not in text and text.endswith("after\n")
+    assert tables.check() == []  # the READMEs under this (temporary) experiments folder

@@ -151,19 +151,27 @@ def render_variants(results: list) -> str:
 def render_buckets(results: list) -> str:
     exact, bucket = results
     ex, bu = exact["seeds"]["0"]["eval"]["intra"], bucket["seeds"]["0"]["eval"]["intra"]
-    lines = [f"Intra pairs, {ex['num_pairs']} evaluated; bucketed minus exact shapes, per pair (mean ± standard "
-             "error):", "", "| method | content, exact (m) | content diff | style, exact (m/s) | style diff |",
-             "|---|---:|---|---:|---|"]
+    evaluated = sum(bool(p["errors"]) for p in ex["per_pair"])
+    lines = [f"Intra pairs, {evaluated} evaluated of {ex['num_pairs']}; bucketed minus exact shapes, per pair (mean ± "
+             "standard error; the largest per-pair difference, in % of the exact error):", "",
+             "| method | content, exact (m) | content diff | largest | style, exact (m/s) | style diff | largest |",
+             "|---|---:|---|---:|---:|---|---:|"]
     for m in ex["methods"]:
         cells = []
         for group in ("content", "style"):
             a = {(p["content"], p["style"]): p["errors"][m][group] for p in ex["per_pair"] if m in p["errors"]}
             b = {(p["content"], p["style"]): p["errors"][m][group] for p in bu["per_pair"] if m in p["errors"]}
             keys = sorted(set(a) & set(b))
-            cells += [f"{np.mean([a[k] for k in keys]):.3f}", _pm([b[k] - a[k] for k in keys])]
+            worst = max(keys, key=lambda k: abs(b[k] - a[k]))
+            cells += [f"{np.mean([a[k] for k in keys]):.3f}", _pm([b[k] - a[k] for k in keys]),
+                      f"{abs(b[worst] - a[worst]):.3f} ({100 * abs(b[worst] - a[worst]) / a[worst]:.1f} %)"]
         lines.append(f"| {METHOD_LABELS.get(m, m)} | " + " | ".join(cells) + " |")
     t = [r["seeds"]["0"]["wall_s"]["eval_intra"] for r in (exact, bucket)]
     lines.append(f"\nEvaluation wall time (incl. compilation, shared cores): exact {t[0]:.0f} s, bucketed {t[1]:.0f} s.")
+    sw = [r.get("swap_diagnostics") or {} for r in (ex, bu)]
+    if all("padding_mass" in d for d in sw):
+        lines.append(f"Soft-swap weight on padded style tokens: exact {sw[0]['padding_mass']:.3f}, bucketed "
+                     f"{sw[1]['padding_mass']:.3f}; largest weight {sw[0]['max_weight']:.3f} / {sw[1]['max_weight']:.3f}.")
     return "\n".join(lines)
 
 

@@ -291,12 +291,15 @@ def run(paths, quick: bool, seeds=None) -> int:
 
 
 def rewrite_tables(cfgs, quick: bool) -> None:
-    """Rewrite the README tables the configs feed, each once its configs' results are at hand."""
+    """Rewrite the README tables the configs feed, each once its configs' results are at hand and only where
+    its README has the table's markers (a ``--quick`` smoke run adds no table to a README)."""
     from experiments import tables
 
     names = dict.fromkeys(n for cfg in cfgs for n in cfg["table"])
     for name in names:
-        if name in tables.TABLES and tables.load_results(name, quick) is not None:
+        readme = tables.ROOT / tables.TABLES[name].readme if name in tables.TABLES else None
+        tag = f"<!-- table:{name}{':quick' if quick else ''} -->"
+        if readme and readme.is_file() and tag in readme.read_text() and tables.load_results(name, quick):
             tables.update([name], quick)
 
 

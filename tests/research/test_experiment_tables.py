@@ -225,7 +225,11 @@ def test_run_rewrites_the_tables_its_configs_feed(tmp_path, monkeypatch):
     monkeypatch.setattr(tables, "TABLES", {"zeggs_x.t": tables.Table("zeggs_x/README.md", ("zeggs_x/configs/d.toml",),
                                                                      rows, partial=True)})
     monkeypatch.setattr(driver, "run_one", lambda cfg, quick, seed, once=True: _write_seed(cfg, seed, 1.0))
+    real_load = driver.load_config
     assert driver.run([path], False, [1]) == 0
     text = readme.read_text()
     assert "| `d` | 1 |" in text and "old" not in text and text.endswith("after\n")
     assert tables.check() == []  # the READMEs under this (temporary) experiments folder
+    monkeypatch.setattr(driver, "load_config", lambda path, quick=False: {**real_load(path), "quick": quick})
+    assert driver.run([path], True, [1]) == 0  # a smoke run: no marker for its table, so no table is added
+    assert readme.read_text() == text

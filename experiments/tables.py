@@ -267,6 +267,18 @@ def load_results(name: str, quick: bool) -> list | None:
     return [r for r in out if r is not None]
 
 
+def wall_words(r: dict, named: bool = False) -> str:
+    """A config's wall time in words (prefixed by its name when ``named``): the sum over its seeds, naming the
+    seeds resumed from a checkpoint (whose wall time counts only the resumed part)."""
+    w = r["wall_s"]
+    seeds = r.get("seeds") if isinstance(r.get("seeds"), dict) else {}
+    resumed = [f"{s} resumed at step {v['train']['start_step']}" for s, v in seeds.items()
+               if isinstance(v, dict) and isinstance(v.get("train"), dict) and v["train"].get("start_step")]
+    notes = ([f"{len(seeds)} seeds"] if len(seeds) > 1 else []) + [f"seed {x}" for x in resumed]
+    return ((f"`{r['_config']['name']}` " if named else "") + (f"{w / 60:.0f} min" if w >= 120 else f"{w:.0f} s")
+            + (f" ({'; '.join(notes)})" if notes else ""))
+
+
 def block(name: str, quick: bool) -> str | None:
     """The marked block of table ``name``: the table and a line naming its results files, commit and command."""
     results = load_results(name, quick)
@@ -276,8 +288,7 @@ def block(name: str, quick: bool) -> str | None:
     links = [f"[`{p.name}`]({p.relative_to(readme_dir)})" for r in results for p in r["_paths"]]
     commits = sorted({(st["commit"] or "unknown")[:10] + ("+dirty" if st["dirty"] else "")
                       for r in results for st in r["_stamps"]})
-    walls = ", ".join(f"{r['wall_s'] / 60:.0f} min" if r["wall_s"] >= 120 else f"{r['wall_s']:.0f} s"
-                      for r in results)
+    walls = ", ".join(wall_words(r, named=len(results) > 1) for r in results)
     label = "Quick smoke run (tiny step counts; not a result)" if quick else "Driver output"
     have = {r["_config"]["name"] for r in results}
     missing = "; ".join([f"`{r['_config']['name']}` seeds {', '.join(map(str, r['_missing']))} not yet run"

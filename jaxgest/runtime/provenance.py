@@ -21,9 +21,10 @@ from jaxgest.runtime.errors import DataError
 from jaxgest.runtime.io import write_json_atomic
 
 STAMP_KEYS = ("commit", "dirty", "version", "config", "command")
-#: where experiments keep their stamped results (git pathspec globs from the checkout's top): not code, so a
-#: rewritten results file does not make a stamp dirty
-RESULTS_PATHS = ("experiments/*/out/**", "experiments/*/results/**")
+#: where experiments keep their stamped results and the READMEs whose tables the driver rewrites from them
+#: (git pathspec globs from the checkout's top): not code, so a rewritten results file or README table (by this
+#: run or one beside it) does not make a stamp dirty
+RESULTS_PATHS = ("experiments/*/out/**", "experiments/*/results/**", "experiments/*/README.md")
 
 
 def _git(args, cwd) -> str | None:
@@ -37,9 +38,9 @@ def _git(args, cwd) -> str | None:
 def commit_of(path=None) -> tuple[str | None, bool | None]:
     """(commit hash, working tree dirty?) of the git checkout holding ``path`` (default: this package).
 
-    Dirty means a tracked file differs from the commit, other than the results files themselves
-    (:data:`RESULTS_PATHS`): an evaluation that rewrites a committed results file, or runs beside one that
-    does, is still the commit's code. ``(None, None)`` outside a checkout (an installed package): the stamp
+    Dirty means a tracked file differs from the commit, other than the results files themselves and the
+    experiment READMEs whose tables are generated from them (:data:`RESULTS_PATHS`): an evaluation that
+    rewrites a committed results file or table, or runs beside one that does, is still the commit's code. ``(None, None)`` outside a checkout (an installed package): the stamp
     then says so instead of guessing.
     """
     where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent

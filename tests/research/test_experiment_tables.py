@@ -152,6 +152,17 @@ def test_seed_files_accumulate_and_merge(tmp_path, monkeypatch):
     assert [st["file"] for st in whole["_stamps"]] == [f"small.s{s}.json" for s in range(3)]
 
 
+def test_wall_words_name_seeds_and_resumed_runs():
+    """The wall line sums a config's seeds, says so, and names a seed resumed from a checkpoint (its wall time
+    counts only the resumed part)."""
+    one = {"wall_s": 90.0, "seeds": {"0": {}}, "_config": {"name": "small"}}
+    assert tables.wall_words(one) == "90 s"
+    two = {"wall_s": 600.0, "_config": {"name": "small"},
+           "seeds": {"0": {"train": {"start_step": 0}}, "1": {"train": {"start_step": 1600}}}}
+    assert tables.wall_words(two) == "10 min (2 seeds; seed 1 resumed at step 1600)"
+    assert tables.wall_words(two, named=True).startswith("`small` 10 min")
+
+
 def test_unknown_seed_is_one_line(capsys):
     path = next(c for c in CONFIGS if c.parent.parent.name == "zeggs_synthetic")
     assert driver.main(["run", str(path), "--seeds", "0", "77"]) == 2

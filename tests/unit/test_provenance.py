@@ -37,7 +37,8 @@ def test_dirty_means_code_not_results(tmp_path):
         subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True,
                        capture_output=True)
 
-    files = {"pkg/code.py": "x = 1\n", "experiments/e/out/claims_a.md": "a\n", "experiments/e/results/r.json": "{}\n"}
+    files = {"pkg/code.py": "x = 1\n", "experiments/e/out/claims_a.md": "a\n", "experiments/e/results/r.json": "{}\n",
+             "experiments/e/README.md": "table\n", "README.md": "root\n"}
     for name, text in files.items():
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / name).write_text(text)
@@ -48,7 +49,11 @@ def test_dirty_means_code_not_results(tmp_path):
     (tmp_path / "experiments/e/out/claims_a.md").write_text("rewritten by an evaluation\n")
     (tmp_path / "experiments/e/results/r.json").write_text("[]\n")
     (tmp_path / "experiments/e/out/new.json").write_text("{}\n")  # untracked: never counted
+    (tmp_path / "experiments/e/README.md").write_text("table rewritten by a run beside this one\n")
     assert provenance.commit_of(tmp_path / "pkg")[1] is False
+    (tmp_path / "README.md").write_text("edited\n")  # any other tracked file counts
+    assert provenance.commit_of(tmp_path / "pkg")[1] is True
+    (tmp_path / "README.md").write_text("root\n")
     (tmp_path / "pkg/code.py").write_text("x = 2\n")
     assert provenance.commit_of(tmp_path / "experiments/e")[1] is True
 

@@ -36,10 +36,11 @@ from hypothesis import strategies as st
 from jaxgest.runtime import parallel
 from jaxgest.runtime.errors import JaxgestError
 from jaxgest.tgst.config import preset as tgst_preset
+from jaxgest.zeggs.config import preset as zeggs_preset
 from jaxgest.runtime.training import TrainState
 
 from faults_testing import params_at
-from tiny_models import TGST_STEPS, ZEGGS_STEPS, train_tgst, train_zeggs
+from tiny_models import CKPT_EVERY, TGST_STEPS, ZEGGS_STEPS, train_tgst, train_zeggs
 
 WORKER = pathlib.Path(__file__).with_name("_parallel_worker.py")
 _spec = importlib.util.spec_from_file_location("_parallel_worker", WORKER)
@@ -159,27 +160,36 @@ def _assert_same_params(a: pathlib.Path, b: pathlib.Path, init: pathlib.Path) ->
 
 #: Adam divides each gradient element by its own magnitude, so an element whose gradient is tiny compared with
 #: the rounding error of the cross-device gradient sum can step by +-lr in a direction that depends on the
-#: summation order, i.e. on the number of devices. The TGST autoencoder and ZeroEGGS agree everywhere within
-#: rtol 1e-5 / atol 1e-6. The tiny TGST transformer has many small gradients: its elements agree within 2 %
+#: summation order, i.e. on the number of devices. The TGST autoencoder agrees everywhere within rtol 1e-5 /
+#: atol 1e-6 (``STRICT``). The tiny TGST transformer has many small gradients: its elements agree within 2 %
 #: of one Adam step (atol 0.02 lr; measured <= 1e-5 with lr 1e-3) except a handful (<= 0.2 % of a leaf, each
 #: within Adam's bound (1 - b1) / sqrt(1 - b2) * lr ~ 3.2 lr per step of the other run), and the key bias of
 #: the decoder's cross-attention has a gradient that is identically zero in exact arithmetic (every logit of
 #: a query moves by the same q.b; the softmax is invariant to that shift): all of it is rounding noise, only
 #: bounded. (The encoder's key bias has a real gradient: the structure loss, eqs. 9-10, uses the encoder's
 #: keys themselves; it is compared like every other leaf.)
+#: ZeroEGGS agrees within ``STRICT`` at its first checkpoint (step 2: <= 1.3e-7); its GRUs then amplify the
+#: rounding to 1.9e-5 by step 4 (0.02 of one step of its lr 1e-3; in 1-25 % of a leaf's elements), and ONE
+#: device under another XLA threading (another reduction order, no sharding at all) differs from the default
+#: run by as much (1.7e-5 at step 4, 1,009 elements, on an Intel Xeon; under 1e-6 on the machines before).
+#: So its final checkpoint is held to 0.1 lr and its losses to rtol 1e-4, its first checkpoint to ``STRICT``
+#: (a wrong cross-device mean would put it a whole step off).
 _TR_LR = tgst_preset("tiny").train.transformer.learning_rate
+_ZE_LR = zeggs_preset("tiny").train.learning_rate
 ADAM_NOISE = {"transformer": {"atol": 0.02 * _TR_LR, "handful": 0.002, "lr": _TR_LR,
-                              "zero_gradient": {"['params']['decoder']['key']['bias']"}}}
+                              "zero_gradient": {"['params']['decoder']['key']['bias']"}},
+              "zeggs": {"atol": 0.1 * _ZE_LR, "handful": 0.0, "lr": _ZE_LR, "zero_gradient": set()}}
 STRICT = {"atol": 1e-6, "handful": 0.0, "lr": 0.0, "zero_gradient": set()}
 
 
-def _assert_same_checkpoint(one: pathlib.Path, four: pathlib.Path, stage: str, step: int) -> None:
+def _assert_same_checkpoint(one: pathlib.Path, four: pathlib.Path, stage: str, step: int,
+                            strict: bool = False) -> None:
     """The parameters of two runs' checkpoints of ``stage`` at ``step`` agree up to float reassociation of
-    the cross-device sums (``ADAM_NOISE``, ``STRICT`` otherwise)."""
+    the cross-device sums (``ADAM_NOISE``, ``STRICT`` otherwise or with ``strict``)."""
     pa, pb = params_at(one / "checkpoints" / stage, step), params_at(four / "checkpoints" / stage, step)
     assert sorted(pa) == sorted(pb)
     params = [k for k in pa if k.startswith("['params']")]
-    noise = ADAM_NOISE.get(stage, STRICT)
+    noise = STRICT if strict else ADAM_NOISE.get(stage, STRICT)
     assert params and noise["zero_gradient"] <= set(params)
     for k in params:
         differ = ~np.isclose(pb[k], pa[k], rtol=1e-5, atol=noise["atol"])
@@ -298,9 +308,12 @@ def test_real_models_train_on_four_devices_like_one(real_runs, tgst_workdir, zeg
     assert all(r["devices"] == 4 and r["processes"] == 1 for r in lines4)
     assert all(r["devices"] == 1 for r in lines1)
     # The loss is the mean over the GLOBAL batch on both: same numbers, not a per-device mean.
-    np.testing.assert_allclose([r["loss"] for r in lines4], [r["loss"] for r in lines1], rtol=1e-5)
+    np.testing.assert_allclose([r["loss"] for r in lines4], [r["loss"] for r in lines1],
+                               rtol=1e-4 if kind == "zeggs" else 1e-5)
     for stage, step in REAL_STAGES[kind].items():
         _assert_same_checkpoint(one, four, stage, step)
+    if kind == "zeggs":
+        _assert_same_checkpoint(one, four, "zeggs", CKPT_EVERY, strict=True)
 
 
 def _python_names(path: pathlib.Path) -> list:

@@ -184,8 +184,10 @@ def render_zeggs(results: list) -> str:
         f = rep["frechet_distance"]
         return f["generated_vs_real"] / f["real_train_vs_real_test"]
 
+    by_seed = []  # per config: {seed: (probe, leak, fr_t, fr_h, beat)}
     for res in results:
         cols = {k: [] for k in ("probe", "leak", "fr_t", "fr_h", "beat")}
+        by_seed.append({})
         for seed, per in res["seeds"].items():
             pp = per.get("pooled", {}).get("probe_pooled", {}).get("style", {})
             h = per["heldout_scripts"]
@@ -196,6 +198,7 @@ def render_zeggs(results: list) -> str:
             cols["fr_t"].append(fr(per["training_scripts"]))
             cols["fr_h"].append(fr(h))
             cols["beat"].append(b["mean"])
+            by_seed[-1][seed] = [cols[k][-1] for k in cols]
             lines.append(f"| `{res['_config']['name']}` | {seed} | {pp.get('trained', np.nan):.3f} | "
                          f"{pp.get('raw_statistics', np.nan):.3f} | {pp.get('random_init', np.nan):.3f} | {leak:.1f} | "
                          f"{fr(per['training_scripts']):.2f}x | {fr(h):.2f}x | "
@@ -204,6 +207,13 @@ def render_zeggs(results: list) -> str:
             lines.append(f"| `{res['_config']['name']}` | mean | {np.mean(cols['probe']):.3f} | | | "
                          f"{np.mean(cols['leak']):.1f} | {np.mean(cols['fr_t']):.2f}x | {np.mean(cols['fr_h']):.2f}x | "
                          f"{_pm(cols['beat'])} over seeds |")
+    for res, seeds in zip(results[1:], by_seed[1:]):  # each config against the first, seed by seed
+        common = [s for s in seeds if s in by_seed[0]]
+        if len(common) > 1:
+            d = np.array([seeds[s] for s in common]) - np.array([by_seed[0][s] for s in common])
+            lines.append(f"| `{res['_config']['name']}` − `{results[0]['_config']['name']}` | paired, {len(common)} "
+                         f"seeds | {_pm(d[:, 0])} | | | {_pm(d[:, 1], 2)} | {_pm(d[:, 2], 2)}x | {_pm(d[:, 3], 2)}x | "
+                         f"{_pm(d[:, 4])} |")
     return "\n".join(lines)
 
 

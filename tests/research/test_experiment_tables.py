@@ -244,3 +244,25 @@ def test_run_rewrites_the_tables_its_configs_feed(tmp_path, monkeypatch):
     monkeypatch.setattr(driver, "load_config", lambda path, quick=False: {**real_load(path), "quick": quick})
     assert driver.run([path], True, [1]) == 0  # a smoke run: no marker for its table, so no table is added
     assert readme.read_text() == text
+
+
+def _zeggs_seed(probe, leak, frechet, beat):
+    rep = {"frechet_distance": {"generated_vs_real": frechet, "real_train_vs_real_test": 1.0},
+           "beat_alignment": {"generated_vs_control": {"mean": beat, "standard_error": 0.01}},
+           "leakage": {"contrasts": {"other_style - same_style_other_content": {"z": leak}}}}
+    return {"pooled": {"probe_pooled": {"style": {"trained": probe, "raw_statistics": 0.9, "random_init": 0.7}}},
+            "training_scripts": rep, "heldout_scripts": rep}
+
+
+def test_zeggs_table_pairs_each_config_with_the_first_by_seed():
+    """The paired row: the second config minus the first over their common seeds (mean ± SE of the differences;
+    a seed only one config ran is left out)."""
+    first = {"_config": {"name": "a"}, "seeds": {"0": _zeggs_seed(0.80, 3.0, 2.0, 0.05),
+                                                 "1": _zeggs_seed(0.90, 4.0, 3.0, 0.07)}}
+    second = {"_config": {"name": "b"}, "seeds": {"0": _zeggs_seed(0.85, 4.0, 1.0, 0.04),
+                                                  "1": _zeggs_seed(0.93, 6.0, 2.0, 0.07),
+                                                  "2": _zeggs_seed(0.10, 0.0, 9.0, 0.00)}}
+    row = tables.render_zeggs([first, second]).splitlines()[-1]
+    assert row.startswith("| `b` − `a` | paired, 2 seeds | +0.040 ± 0.010 | | | +1.50 ± 0.50 | -1.00 ± 0.00x |")
+    assert row.endswith("| -0.005 ± 0.005 |")
+    assert "paired" not in tables.render_zeggs([first])

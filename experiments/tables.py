@@ -281,10 +281,10 @@ def wall_words(r: dict, named: bool = False) -> str:
     """A config's wall time in words (prefixed by its name when ``named``): the sum over its seeds, naming the
     seeds resumed from a checkpoint (whose wall time counts only the resumed part)."""
     w = r["wall_s"]
-    seeds = r.get("seeds") if isinstance(r.get("seeds"), dict) else {}
-    resumed = [f"{s} resumed at step {v['train']['start_step']}" for s, v in seeds.items()
-               if isinstance(v, dict) and isinstance(v.get("train"), dict) and v["train"].get("start_step")]
-    notes = ([f"{len(seeds)} seeds"] if len(seeds) > 1 else []) + [f"seed {x}" for x in resumed]
+    seeds = r.get("seeds") or {}
+    notes = ([f"{len(seeds)} seeds"] if len(seeds) > 1 else []) + [
+        f"seed {s} resumed at step {v['train']['start_step']}" for s, v in seeds.items()
+        if (v.get("train") or {}).get("start_step")]
     return ((f"`{r['_config']['name']}` " if named else "") + (f"{w / 60:.0f} min" if w >= 120 else f"{w:.0f} s")
             + (f" ({'; '.join(notes)})" if notes else ""))
 

@@ -40,8 +40,8 @@ def commit_of(path=None) -> tuple[str | None, bool | None]:
 
     Dirty means a tracked file differs from the commit, other than the results files themselves and the
     experiment READMEs whose tables are generated from them (:data:`RESULTS_PATHS`): an evaluation that
-    rewrites a committed results file or table, or runs beside one that does, is still the commit's code. ``(None, None)`` outside a checkout (an installed package): the stamp
-    then says so instead of guessing.
+    rewrites a committed results file or table, or runs beside one that does, is still the commit's code.
+    ``(None, None)`` outside a checkout (an installed package): the stamp then says so instead of guessing.
     """
     where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
     where = where if where.is_dir() else where.parent

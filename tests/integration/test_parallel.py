@@ -178,8 +178,11 @@ _TR_LR = tgst_preset("tiny").train.transformer.learning_rate
 _ZE_LR = zeggs_preset("tiny").train.learning_rate
 ADAM_NOISE = {"transformer": {"atol": 0.02 * _TR_LR, "handful": 0.002, "lr": _TR_LR,
                               "zero_gradient": {"['params']['decoder']['key']['bias']"}},
-              "zeggs": {"atol": 0.1 * _ZE_LR, "handful": 0.0, "lr": _ZE_LR, "zero_gradient": set()}}
+              "zeggs": {"atol": 0.1 * _ZE_LR, "handful": 0.0, "lr": _ZE_LR, "zero_gradient": set(),
+                        "strict_first_checkpoint": True}}
 STRICT = {"atol": 1e-6, "handful": 0.0, "lr": 0.0, "zero_gradient": set()}
+#: per real model: the relative tolerance of the logged losses (ZeroEGGS: the amplified rounding above)
+LOSS_RTOL = {"tgst": 1e-5, "zeggs": 1e-4}
 
 
 def _assert_same_checkpoint(one: pathlib.Path, four: pathlib.Path, stage: str, step: int,
@@ -308,12 +311,11 @@ def test_real_models_train_on_four_devices_like_one(real_runs, tgst_workdir, zeg
     assert all(r["devices"] == 4 and r["processes"] == 1 for r in lines4)
     assert all(r["devices"] == 1 for r in lines1)
     # The loss is the mean over the GLOBAL batch on both: same numbers, not a per-device mean.
-    np.testing.assert_allclose([r["loss"] for r in lines4], [r["loss"] for r in lines1],
-                               rtol=1e-4 if kind == "zeggs" else 1e-5)
+    np.testing.assert_allclose([r["loss"] for r in lines4], [r["loss"] for r in lines1], rtol=LOSS_RTOL[kind])
     for stage, step in REAL_STAGES[kind].items():
         _assert_same_checkpoint(one, four, stage, step)
-    if kind == "zeggs":
-        _assert_same_checkpoint(one, four, "zeggs", CKPT_EVERY, strict=True)
+        if ADAM_NOISE.get(stage, {}).get("strict_first_checkpoint"):
+            _assert_same_checkpoint(one, four, stage, CKPT_EVERY, strict=True)
 
 
 def _python_names(path: pathlib.Path) -> list:

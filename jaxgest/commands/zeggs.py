@@ -1,4 +1,4 @@
-"""``jaxgest zeggs train | generate | pca | evaluate`` (docs/design.md §6)."""
+"""``jaxgest zeggs train | generate | pca | evaluate | import-official`` (docs/design.md §6)."""
 
 from __future__ import annotations
 
@@ -31,7 +31,8 @@ def register(subparsers) -> None:
     g = sub.add_parser("generate", help="gestures for a speech file in the style of example clip(s)")
     g.add_argument("--workdir", required=True)
     g.add_argument("--audio", required=True, help="WAV/FLAC speech (any sample rate or channel count)")
-    g.add_argument("--style", action="append", required=True, help="style example BVH (repeat to blend)")
+    g.add_argument("--style", action="append", required=True,
+                   help="style example BVH (repeat to blend); for an imported label-based model (v2) a style label")
     g.add_argument("--weights", default=None, help="blend weights, comma-separated, one per --style, used as "
                    "given (2,0 doubles the first style's embedding; default: the average)")
     g.add_argument("--normalize-weights", action="store_true",
@@ -43,8 +44,19 @@ def register(subparsers) -> None:
                    help="generator weight format (not the blend --weights): bf16 or int8 weight-only")
     g.add_argument("--pca-edit", action="append", default=[], metavar="K=DELTA",
                    help="move the style embedding along PCA component K by DELTA standard deviations")
+    g.add_argument("--first-pose", default=None, metavar="BVH",
+                   help="imported authors' models only: the clip whose frame 0 starts the motion (default: the last "
+                   "style example; required by label-based v2)")
     g.add_argument("--out", required=True, help="output BVH (on the first style clip's skeleton)")
     g.set_defaults(func=_generate)
+
+    o = sub.add_parser("import-official", help="import the ZeroEGGS authors' released models (a clone of their "
+                       "repository with Git LFS files) into a workdir that generate reads")
+    o.add_argument("--repo", required=True, metavar="DIR", help="clone of ubisoft/ubisoft-laforge-ZeroEGGS")
+    o.add_argument("--version", required=True, choices=("v1", "v2"),
+                   help="v1: example-based style encoder; v2: style labels")
+    o.add_argument("--workdir", required=True, help="folder to write (official.json, weights, statistics)")
+    o.set_defaults(func=_import_official)
 
     c = sub.add_parser("pca", help="fit a PCA of style embeddings (for --pca-edit)")
     c.add_argument("--workdir", required=True)
@@ -131,21 +143,43 @@ def _generate(args) -> int:
     from jaxgest.runtime.io import check_output_path
     from jaxgest.motion import bvh
     from jaxgest.zeggs.inference import load_model
+    from jaxgest.zeggs.official import is_official, load as load_official
     from jaxgest.zeggs.pca import parse_edits
 
     out = check_output_path(args.out)
     weights = _parse_weights(args.weights)
     edits = parse_edits(args.pca_edit)
-    styles = [bvh.load(s) for s in args.style]
+    official = load_official(args.workdir) if is_official(args.workdir) else None
+    labels = official is not None and not official.example_based
+    styles = list(args.style) if labels else [bvh.load(s) for s in args.style]
     if not pathlib.Path(args.audio).is_file():
         raise JaxgestError(f"{args.audio}: no such audio file")
-    model = load_model(args.workdir)
+    extra = {}
+    if official is not None:
+        model = official
+        extra["first_pose"] = bvh.load(args.first_pose) if args.first_pose else None
+    elif args.first_pose:
+        raise JaxgestError("--first-pose is for imported authors' models (zeggs import-official); this model "
+                           "starts from the first style clip")
+    else:
+        model = load_model(args.workdir)
     motion = model.generate(args.audio, styles, weights=weights, seed=args.seed, temperature=args.temperature,
                             pca_edits=edits, name=out.stem, normalize_weights=args.normalize_weights,
-                            weight_format=args.weight_format)
+                            weight_format=args.weight_format, **extra)
     bvh.save(motion, out)
     print(f"zeggs: wrote {out} ({motion.num_frames} frames at {motion.fps:g} fps, "
           f"{motion.skeleton.num_joints} joints)")
+    return 0
+
+
+def _import_official(args) -> int:
+    from jaxgest.zeggs.official import import_release
+
+    release = import_release(args.repo, args.version, args.workdir)
+    m = release.manifest
+    style = "example clips (style encoder)" if release.example_based else f"labels: {', '.join(m['label_names'])}"
+    print(f"zeggs: imported {m['name']} into {args.workdir} ({len(m['bone_names'])} joints at {m['fps']:g} fps; "
+          f"style from {style}); generate with: jaxgest zeggs generate --workdir {args.workdir} ...")
     return 0
 
 

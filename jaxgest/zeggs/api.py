@@ -46,8 +46,11 @@ def generate(audio, styles: Union[StyleLike, Sequence[StyleLike]], *, workdir,
     Returns a Motion on the first style clip's skeleton at its frame rate, ``round(duration * fps)`` frames.
     References: Ghorbani et al. 2023, §3, §5.2.
     """
+    from jaxgest.zeggs.official import is_official
+
     audio, sr = audio_input(audio)  # checked before the workdir is read
-    styles = as_motions(styles)
+    if not is_official(workdir):  # an imported label-based release takes label names
+        styles = as_motions(styles)
     return load(workdir).generate(audio, styles, weights=weights, seed=seed, temperature=temperature,
                                   pca_edits=pca_edits, sr=sr, normalize_weights=normalize_weights,
                                   weight_format=weight_format)

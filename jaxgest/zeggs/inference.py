@@ -272,9 +272,14 @@ def bucket_length(n: int, smallest: int = 64) -> int:
     return L
 
 
-def load(workdir) -> TrainedZeggs:
+def load(workdir):
     """The trained ZeroEGGS model of ``workdir``, read now (a long-lived caller keeps the returned model,
-    which also keeps its compiled functions)."""
+    which also keeps its compiled functions): a :class:`TrainedZeggs`, or for a workdir written by
+    ``jaxgest zeggs import-official`` an :class:`jaxgest.zeggs.official.OfficialZeggs` (same ``generate``)."""
+    from jaxgest.zeggs.official import is_official, load as load_official
+
+    if is_official(workdir):
+        return load_official(workdir)
     return TrainedZeggs(load_workdir(workdir), workdir)
 
 

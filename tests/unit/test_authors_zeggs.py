@@ -196,3 +196,94 @@ def test_import_names_the_missing_or_mismatched_file(release_repo, tmp_path):
         import_release(broken, "v1", tmp_path / "w3", log=lambda *_: None)
     with pytest.raises(DataError, match="--version must be one of"):
         import_release(repo, "v3", tmp_path / "w4", log=lambda *_: None)
+
+
+# -- the whole pipeline against the authors' generate.py --------------------------------------------------
+ZEGGS_WAV = ZEGGS_BVH.with_suffix(".wav")
+SECONDS = 12.0
+
+
+@pytest.fixture(scope="module")
+def speech_wav(tmp_path_factory):
+    """The first 12 s of the shared ZEGGS speech (its own sample rate)."""
+    import soundfile as sf
+
+    if not ZEGGS_WAV.is_file():
+        pytest.skip(f"no shared ZEGGS speech at {ZEGGS_WAV}")
+    y, sr = sf.read(str(ZEGGS_WAV), dtype="float32")
+    path = tmp_path_factory.mktemp("speech") / "speech12.wav"
+    sf.write(str(path), y[: int(SECONDS * sr)], sr)
+    return path
+
+
+def _their_generate(repo, results, **kw):
+    import pathlib as pl
+
+    with authors_code():
+        gen = their("generate")
+        gen.generate_gesture(network_path=pl.Path(repo) / "data/outputs/v1/saved_models",
+                             data_path=pl.Path(repo) / "data/processed_v1", results_path=pl.Path(results),
+                             use_gpu=False, file_name="theirs", **kw)
+    return pl.Path(results) / "theirs.bvh"
+
+
+def _world(motion) -> np.ndarray:
+    from jaxgest.motion.kinematics import forward_kinematics
+
+    return forward_kinematics(motion)
+
+
+def test_cli_generate_at_temperature_0_equals_the_authors_generate_gesture(release_repo, speech_wav, tmp_path,
+                                                                           capsys):
+    """Done-when of the import: ``import-official`` + ``zeggs generate --temperature 0`` (the posterior mean)
+    matches ``generate_gesture`` at temperature 1e9 (theirs divides sigma) over 12 s of speech."""
+    from jaxgest.cli import main
+    from jaxgest.motion import bvh
+
+    repo, clip = release_repo
+    w, out = tmp_path / "w", tmp_path / "mine.bvh"
+    assert main(["zeggs", "import-official", "--repo", str(repo), "--version", "v1", "--workdir", str(w)]) == 0
+    assert main(["zeggs", "generate", "--workdir", str(w), "--audio", str(speech_wav), "--style", str(clip),
+                 "--temperature", "0", "--out", str(out)]) == 0
+    theirs = bvh.load(_their_generate(repo, tmp_path / "theirs", audio_file=speech_wav, styles=[(clip, None)],
+                                      temperature=1e9))
+    mine = bvh.load(out)
+    assert mine.num_frames == theirs.num_frames == int(round(60 * SECONDS))
+    err = np.linalg.norm(_world(mine) - _world(theirs), axis=-1)
+    motion = np.linalg.norm(_world(theirs)[1:] - _world(theirs)[:-1], axis=-1).sum(0).max()
+    assert motion > 10.0  # some joint travels more than 10 cm: the comparison is not of two still poses
+    assert err.max() <= 1.0 and err.mean() <= 0.1, (err.max(), err.mean())
+
+
+def test_label_based_v2_generates_from_a_label_and_a_first_pose(release_repo, speech_wav, tmp_path):
+    """v2 has no style encoder: a label's one-hot vector and a first pose (theirs requires one)."""
+    import torch
+
+    from jaxgest.motion import bvh
+    from jaxgest.runtime.errors import JaxgestError
+    from jaxgest.zeggs.official import import_release, load
+
+    repo, clip = release_repo
+    v2 = tmp_path / "repo2"
+    shutil.copytree(repo, v2, symlinks=True)
+    (v2 / "data/outputs/v1/saved_models/style_encoder.pt").unlink()
+    opts = json.loads((v2 / "data/outputs/v1/options.json").read_text())
+    opts["train_opt"]["style_encoding_type"] = "label"
+    (v2 / "data/outputs/v1/options.json").write_text(json.dumps(opts))
+    labels = json.loads((v2 / "data/processed_v1/data_definition.json").read_text())["label_names"]
+    with authors_code():
+        dec = their("modules").Decoder(pose_input_size=1134, pose_output_size=1131, speech_encoding_size=64,
+                                       style_encoding_size=len(labels), hidden_size=HIDDEN, num_rnn_layers=2)
+        _randomize(dec, 3)
+        torch.save(dec, v2 / "data/outputs/v1/saved_models/decoder.pt")
+    import_release(v2, "v1", tmp_path / "w", log=lambda *_: None)
+    model = load(tmp_path / "w")
+    with pytest.raises(JaxgestError, match="needs a first pose"):
+        model.generate(speech_wav, [labels[0]])
+    with pytest.raises(JaxgestError, match="styles must be among"):
+        model.generate(speech_wav, ["NoSuchStyle"], first_pose=clip)
+    mine = model.generate(speech_wav, [labels[0]], first_pose=clip)
+    theirs = bvh.load(_their_generate(v2, tmp_path / "theirs", audio_file=speech_wav, styles=[labels[0]],
+                                      style_encoding_type="label", first_pose=clip))
+    err = np.linalg.norm(_world(mine) - _world(theirs), axis=-1)
+    assert err.max() <= 1.0 and err.mean() <= 0.1, (err.max(), err.mean())

@@ -236,7 +236,9 @@ def _world(motion) -> np.ndarray:
 def test_cli_generate_at_temperature_0_equals_the_authors_generate_gesture(release_repo, speech_wav, tmp_path,
                                                                            capsys):
     """Done-when of the import: ``import-official`` + ``zeggs generate --temperature 0`` (the posterior mean)
-    matches ``generate_gesture`` at temperature 1e9 (theirs divides sigma) over 12 s of speech."""
+    matches ``generate_gesture`` at temperature 1e9 (theirs divides sigma) over 12 s of speech. The issue's
+    bar is 1 cm max / 0.1 cm mean joint position; measured 0.0057 cm max / 0.0012 cm mean (float32 on both
+    sides and their BVH text at 6 decimals), so the test holds it to 0.05 / 0.01 cm."""
     from jaxgest.cli import main
     from jaxgest.motion import bvh
 
@@ -252,11 +254,12 @@ def test_cli_generate_at_temperature_0_equals_the_authors_generate_gesture(relea
     err = np.linalg.norm(_world(mine) - _world(theirs), axis=-1)
     motion = np.linalg.norm(_world(theirs)[1:] - _world(theirs)[:-1], axis=-1).sum(0).max()
     assert motion > 10.0  # some joint travels more than 10 cm: the comparison is not of two still poses
-    assert err.max() <= 1.0 and err.mean() <= 0.1, (err.max(), err.mean())
+    assert err.max() <= 0.05 and err.mean() <= 0.01, (err.max(), err.mean())
 
 
 def test_label_based_v2_generates_from_a_label_and_a_first_pose(release_repo, speech_wav, tmp_path):
-    """v2 has no style encoder: a label's one-hot vector and a first pose (theirs requires one)."""
+    """v2 has no style encoder: a label's one-hot vector and a first pose (theirs requires one). Measured
+    against their ``generate_gesture``: 0.0060 cm max / 0.0014 cm mean over 12 s."""
     import torch
 
     from jaxgest.motion import bvh
@@ -286,4 +289,4 @@ def test_label_based_v2_generates_from_a_label_and_a_first_pose(release_repo, sp
     theirs = bvh.load(_their_generate(v2, tmp_path / "theirs", audio_file=speech_wav, styles=[labels[0]],
                                       style_encoding_type="label", first_pose=clip))
     err = np.linalg.norm(_world(mine) - _world(theirs), axis=-1)
-    assert err.max() <= 1.0 and err.mean() <= 0.1, (err.max(), err.mean())
+    assert err.max() <= 0.05 and err.mean() <= 0.01, (err.max(), err.mean())

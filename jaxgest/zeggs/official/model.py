@@ -80,7 +80,7 @@ class OfficialZeggs:
             raise DataError(f"{name}: the authors' model needs a clip of its own rig ({len(self.bone_names)} "
                             f"ZEGGS joints); this one has {motion.skeleton.num_joints} joints"
                             + ("" if motion.skeleton.num_joints != len(self.bone_names) else " in another order"))
-        if abs(motion.fps - self.fps) > 1e-3:
+        if abs(motion.fps - self.fps) > 0.01:  # frame times are written rounded (0.0166667 s)
             motion = resample_motion(motion, self.fps)
         return motion
 

@@ -213,10 +213,10 @@ def import_release(repo, version: str, workdir, *, log=print) -> Release:
         arrays = _load_module(files[net], code_dir)
         _expect(arrays, shapes[net], files[net])
         params[net] = arrays
-    manifest = {
+    manifest = {  # fps: nominal, as theirs (dt 0.016667 is 60 fps: ``int(np.ceil(1 / frametime))``)
         "format": FORMAT, "version": version, "name": options.get("name", f"ZEGGS_{version}"),
         "source": str(repo.resolve()), "style_encoding_type": style_type, "rnn_cond": cond, "dt": dt,
-        "fps": 1.0 / dt, "bone_names": list(definition["bone_names"]),
+        "fps": float(round(1.0 / dt)), "bone_names": list(definition["bone_names"]),
         "parents": [int(p) for p in definition["parents"]], "label_names": list(definition["label_names"]),
         "options": options, "audio_conf": conf.get("audio_conf", {}),
         "audio_feature_type": conf.get("audio_feature_type", ["mel_spec", "energy"]),

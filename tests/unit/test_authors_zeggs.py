@@ -290,3 +290,65 @@ def test_label_based_v2_generates_from_a_label_and_a_first_pose(release_repo, sp
                                       style_encoding_type="label", first_pose=clip))
     err = np.linalg.norm(_world(mine) - _world(theirs), axis=-1)
     assert err.max() <= 0.05 and err.mean() <= 0.01, (err.max(), err.mean())
+
+
+# -- the training objective against the loss block of their train.py, executed --------------------------------
+def _their_loss_block() -> str:
+    """The lines of their ``train.py`` from ``# Compute Character/World Space`` to ``) / 18.0`` (read where
+    they lie, dedented; executed as they are)."""
+    import textwrap
+
+    lines = (ZEGGS_CODE / "train.py").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if "# Compute Character/World Space" in line)
+    end = next(i for i, line in enumerate(lines) if i > start and line.strip().startswith(") / 18.0"))
+    return textwrap.dedent("\n".join(lines[start:end + 1]))
+
+
+@pytest.mark.parametrize("error", ["shift", "noise", "static"])
+def test_loss_terms_equal_their_train_py(release_repo, error):
+    """Every weighted term, the KL and the total on the same errors as their train.py: a 0.15 s shift of the
+    real clip, noise on every channel, and a static pose (their scale: the issue measured 2.2-4.5)."""
+    import torch
+
+    from jaxgest.motion import bvh
+    from jaxgest.zeggs.official import features, losses, network
+
+    _, clip = release_repo
+    st = features.pose_state(bvh.load(clip))
+    T, B, shift = 64, 2, 9  # 0.15 s at 60 fps
+    W = {k: np.stack([st[k][s:s + T] for s in (100, 300)]).astype(np.float32) for k in network.STATE_KEYS}
+    if error == "shift":
+        O = {k: np.stack([st[k][s + shift:s + shift + T] for s in (100, 300)]).astype(np.float32) for k in W}
+    elif error == "noise":
+        rng = np.random.default_rng(1)
+        O = {k: (v + rng.normal(scale=0.05 * (np.abs(v).mean() + 1e-3), size=v.shape)).astype(np.float32)
+             for k, v in W.items()}
+        O["root_rot"] = O["root_rot"] / np.linalg.norm(O["root_rot"], axis=-1, keepdims=True)
+    else:
+        O = {k: np.repeat(v[:, :1], T, axis=1) for k, v in W.items()}
+    gaze = np.stack([st["gaze_pos"][s:s + T] for s in (100, 300)]).astype(np.float32)
+    rng = np.random.default_rng(2)
+    mu, logvar = rng.normal(size=(B, 64)).astype(np.float32), rng.normal(size=(B, 64)).astype(np.float32) * 0.3
+    iteration, dt = 9000, 1.0 / 60.0
+    parents = [int(p) for p in bvh.load(clip).skeleton.parents]
+    with authors_code():
+        ns = {}
+        for m in ("anim.tquat", "anim.txform", "modules"):
+            ns.update({k: v for k, v in vars(their(m)).items() if not k.startswith("__")})
+        ns.update({"torch": torch, "dt": dt, "iteration": iteration, "parents": torch.as_tensor(parents),
+                   "mu": torch.as_tensor(mu), "logvar": torch.as_tensor(logvar), "W_gaze_pos": torch.as_tensor(gaze)})
+        names = {"root_pos": "root_pos", "root_rot": "root_rot", "root_vel": "root_vel", "root_vrt": "root_vrt",
+                 "lpos": "lpos", "ltxy": "ltxy", "lvel": "lvel", "lvrt": "lvrt"}
+        for k, n in names.items():
+            ns[f"O_{n}"], ns[f"W_{n}"] = torch.as_tensor(O[k]), torch.as_tensor(W[k])
+        exec(compile(_their_loss_block(), str(ZEGGS_CODE / "train.py"), "exec"), ns)
+    terms = losses.reconstruction_terms({k: O[k] for k in O}, {k: W[k] for k in W}, gaze, parents, dt)
+    kl = losses.kl_divergence(mu, logvar)
+    total = float(losses.total_loss(terms, kl, iteration))
+    for k in losses.WEIGHTS:
+        theirs = float(ns[f"loss_{k}"])
+        assert abs(float(terms[k]) - theirs) <= 1e-4 * max(abs(theirs), 1e-3), (k, float(terms[k]), theirs)
+    assert abs(float(losses.kl_weight(iteration) * kl) - float(ns["loss_kl_div"])) <= 1e-5
+    assert abs(total - float(ns["loss"])) <= 1e-4 * abs(float(ns["loss"]))
+    if error != "noise":  # measured: 5.8 (shift), 4.6 (static); jaxgest's root-frame terms read 39-66 here
+        assert 1.0 < float(sum(terms[k] for k in losses.WEIGHTS)) < 20.0

@@ -28,7 +28,8 @@ References: Ghorbani et al. 2023, §3.1 and §4.1 (log-amplitude mel spectrogram
 energy, FFT Hanning window of 50 ms, hop 12.5 ms, resampled to the animation rate, normalised); the authors'
 code (ubisoft-laforge-ZeroEGGS 4992d9a: ``ZEGGS/data_pipeline.py`` ``preprocess_audio``,
 ``ZEGGS/audio/spectrograms.py``, ``data/processed_v1/data_pipeline_conf.json``); docs/design.md §4;
-ITU-R BS.1770-4 (loudness); pyloudnorm 0.1 (Steinmetz & Reiss 2021, the authors' loudness meter).
+ITU-R BS.1770-4 (loudness); pyloudnorm 0.1.0-0.2.0 (Steinmetz & Reiss 2021, the authors' loudness meter; the same
+integrated loudness in both).
 """
 
 from __future__ import annotations
@@ -99,7 +100,7 @@ def k_weighting(sr: float, design: str = "bs1770") -> list[tuple[np.ndarray, np.
     cookbook biquads with a +4 dB shelf at 1500 Hz (Q 1/sqrt 2) and a 38 Hz high-pass (Q 0.5); they only
     approximate the table (at 16 kHz speech reads ~0.12 LU quieter than with ``"bs1770"``).
     References: ITU-R BS.1770-4, §2.1, Tables 1-2; R. Bristow-Johnson, Audio EQ Cookbook (high shelf, high
-    pass); pyloudnorm 0.1 ``IIRfilter``.
+    pass); pyloudnorm ``IIRfilter``.
     """
     if design == "pyloudnorm":
         def rbj(kind, gain_db, q, fc):
@@ -147,7 +148,7 @@ def integrated_loudness(y: np.ndarray, sr: float, meter: str = "bs1770") -> floa
     ``round((T - 0.4) / 0.1) + 1`` blocks with truncated sample bounds, the last one possibly short but
     divided by the full block length, strict gates), equal to it to ~1e-12 LU; audio shorter than a block,
     which pyloudnorm refuses, is measured as one block. References: ITU-R BS.1770-4, §2 (eqs. 1-7);
-    pyloudnorm 0.1 ``Meter.integrated_loudness``.
+    pyloudnorm ``Meter.integrated_loudness``.
     """
     from scipy.signal import lfilter  # scipy comes with librosa
 
@@ -212,7 +213,7 @@ def normalize_loudness(y: np.ndarray, sr: float, target_lufs: float = LOUDNESS_L
     NaN). The authors' data pipeline normalises every recording to -20 LUFS before feature extraction.
     ``meter="bs1770"`` returns float32; ``meter="pyloudnorm"`` multiplies the samples, as given, by the
     float64 gain, as pyloudnorm does (float32 samples become float64). References: ITU-R BS.1770-4;
-    pyloudnorm 0.1 ``normalize.loudness``; docs/design.md §4.
+    pyloudnorm ``normalize.loudness``; docs/design.md §4.
     """
     if meter == "pyloudnorm":
         y = np.asarray(y)

@@ -2,10 +2,10 @@
 
 The authors' code and files are read where they lie (``../shared/third_party/zeggs-official``, never copied)
 through ``tests/helpers/authors_zeggs.py``; these tests skip with the reason when it or its Python packages
-(torch, pandas, omegaconf, rich, pyloudnorm; ``.ci/run`` installs them) are missing. Real speech: a 10 s crop
+(torch, pandas, omegaconf, rich, pyloudnorm, sox; ``.ci/run`` installs them) are missing. Real speech: a 10 s crop
 of one ZEGGS and one BEAT2 recording from ``../shared/data/speech-gesture``.
 
-Measured (10 s crops; numpy 2.4, scipy 1.17, torch 2.13 CPU):
+Measured (10 s crops; numpy 2.4, scipy 1.17, librosa 0.11, soxr 1.1, pyloudnorm 0.2, torch 2.13 CPU):
 
 * features, ``speech_features(path, method="authors")`` vs their ``read_wavfile`` + ``preprocess_audio`` on
   the same 16 kHz file: identical, max abs difference 0.0 (ZEGGS, int16 WAV, and BEAT2, float32 WAV); on
@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import pathlib
 import shutil
+import os
 import subprocess
 import sys
 import textwrap
@@ -40,9 +41,7 @@ from jaxgest.runtime.errors import CheckpointError
 from jaxgest.zeggs import torch_import
 from jaxgest.zeggs.config import MODEL_ADDED_FIELDS, Config, ModelConfig, preset
 from jaxgest.zeggs.speech_encoder import SpeechEncoder
-
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "helpers"))
-from authors_zeggs import SHARED, ZEGGS_CODE, authors_code, released, require_authors, their  # noqa: E402
+from authors_zeggs import SHARED, ZEGGS_CODE, authors_code, released, require_authors, their
 
 SPEECH = SHARED / "data" / "speech-gesture"
 WAVS = {"zeggs": SPEECH / "zeggs" / "067_Speech_2_x_1_0.wav", "beat2": SPEECH / "beat2" / "2_scott_0_1_1.wav"}
@@ -255,7 +254,7 @@ def test_converting_numpy_arrays_does_not_import_torch():
         print(sorted(p), "torch" in sys.modules)
     """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         env={**__import__("os").environ, "JAX_PLATFORMS": "cpu"})
+                         env={**os.environ, "JAX_PLATFORMS": "cpu"})
     assert out.stdout.split() == ["['conv0',", "'conv1',", "'linear']", "False"]
 
 

@@ -3,8 +3,8 @@
 A preset (:class:`Config`, ``PRESETS[name]`` / :func:`preset`) has three parts:
 
 * :class:`ModelConfig` -- what rebuilds the network and interprets its inputs and outputs: layer sizes,
-  the rig (joints, FK parents/offsets; set from the data), frame rate, speech features (loudness
-  normalisation: it changes the features the network was trained on) and pose input normalisation. A
+  the rig (joints, FK parents/offsets; set from the data), frame rate, speech features (their method and
+  loudness normalisation: they change the features the network was trained on) and pose input normalisation. A
   checkpoint carries only this part; a resumed run must request the same one.
 * :class:`TrainConfig` -- losses and their weights, KL schedule, optimiser, batch, windows, style sampling,
   initial-pose options, augmentation, steps and XLA compiler options. Changing any of it never blocks resuming.

@@ -78,6 +78,22 @@ def crop(request, tmp_path_factory):
     return request.param, path
 
 
+@pytest.mark.parametrize("version", ["v1", "v2"])
+def test_constants_are_their_released_conf(version):
+    """jaxgest's constants are the released ``data_pipeline_conf.json`` audio options (v1 and v2 alike)."""
+    path = released(version, "data_pipeline_conf.json")
+    if not path.is_file():
+        pytest.skip(f"the authors' {path.name} is not at {path}")
+    d = json.loads(path.read_text())
+    c = d["audio_conf"]
+    assert d["audio_feature_type"] == ["mel_spec", "energy"]
+    assert (c["sampling_rate"], c["filter_length"], c["hop_length"], c["n_mel_channels"], c["mel_fmin"], c["mel_fmax"],
+            c["min_clipping"]) == (audio.AUTHORS_SR, audio.AUTHORS_N_FFT, audio.AUTHORS_HOP, audio.N_MELS, audio.FMIN,
+                                   audio.FMAX, audio.AUTHORS_MIN_AMPLITUDE)
+    assert (c["pre_emphasis"], c["centered"], c["real_amplitude"], c["normalize_mel_bins"], c["normalize_range"],
+            c["normalize_loudness"], c["resample_method"]) == (False, True, True, True, True, True, "linear")
+
+
 def test_authors_features_equal_their_pipeline(crop):
     """From the same WAV file, jaxgest's ``method="authors"`` features are theirs to float32 rounding."""
     require_authors()

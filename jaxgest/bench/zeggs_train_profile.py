@@ -96,7 +96,8 @@ def profile(preset: str = "small", repeats: int = 5, unrolls=(1, 2, 4, 8), loss_
         m, t = cfg.model, cfg.train
         a = t.speed_augmentation
         data = zdata.build(clips, fps=m.fps, mirror=t.mirror, speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,),
-                           progress=False, loudness=m.loudness, input_norm=m.input_norm)
+                           progress=False, loudness=m.loudness, input_norm=m.input_norm,
+                           speech_method=m.speech_features)
 
         def batch_fn(i):
             return data.batch(i, seed=0, batch=t.batch_size, window=t.window, style_min=t.style_window_min,

@@ -3,8 +3,8 @@
 A preset (:class:`Config`, ``PRESETS[name]`` / :func:`preset`) has three parts:
 
 * :class:`ModelConfig` -- what rebuilds the network and interprets its inputs and outputs: layer sizes,
-  the rig (joints, FK parents/offsets; set from the data), frame rate, speech features (loudness
-  normalisation: it changes the features the network was trained on) and pose input normalisation. A
+  the rig (joints, FK parents/offsets; set from the data), frame rate, speech features (their method and
+  loudness normalisation: they change the features the network was trained on) and pose input normalisation. A
   checkpoint carries only this part; a resumed run must request the same one.
 * :class:`TrainConfig` -- losses and their weights, KL schedule, optimiser, batch, windows, style sampling,
   initial-pose options, augmentation, steps and XLA compiler options. Changing any of it never blocks resuming.
@@ -32,7 +32,8 @@ the target window), ``"disjoint"`` (the default: the same clip, apart from the t
 
 Every part is a frozen (hashable, jit-static) dataclass of JSON-friendly fields. ``Config.to_dict()`` is
 written to ``config.json`` and :meth:`Config.from_dict` reads it back, including the flat dict of earlier
-versions (with :data:`LEGACY_DEFAULTS` for fields those versions did not have).
+versions (with :data:`LEGACY_DEFAULTS` for fields those versions did not have, and
+:data:`MODEL_ADDED_FIELDS` for model fields added since).
 """
 
 from __future__ import annotations
@@ -100,6 +101,10 @@ class ModelConfig(_Part):
     gru_hidden: int = 1024  # hidden size of each GRU layer, of the pre-GRU linear layer and initializer
     gru_layers: int = 2  # number of stacked GRU layers
     init_hidden: int = 1024  # hidden width of the 3-layer hidden-state initializer
+    # --- speech features (appended: fields above keep their order) ---------------------------------
+    speech_features: str = "authors"  # jaxgest.audio.speech_features(method=...): "authors" (the authors'
+    #   pipeline, which the released speech encoders expect) or "librosa" (models trained before it existed:
+    #   a stored config without this field means "librosa", MODEL_ADDED_FIELDS)
 
     def __post_init__(self):
         if len(self.speech_channels) != len(self.speech_kernels):
@@ -110,6 +115,8 @@ class ModelConfig(_Part):
             raise ValueError("gru_layers and num_joints must be >= 1")
         if self.input_norm not in ("group", "channel"):
             raise ValueError(f"input_norm must be 'group' or 'channel', got {self.input_norm!r}")
+        if self.speech_features not in ("authors", "librosa"):
+            raise ValueError(f"speech_features must be 'authors' or 'librosa', got {self.speech_features!r}")
 
     @property
     def layout(self) -> PoseLayout:
@@ -211,7 +218,10 @@ _FIELDS = {part: {f.name for f in dataclasses.fields(cls)} for part, cls in _PAR
 
 # Fields of the flat config of earlier versions that were added after models had been trained with the old
 # behaviour: a flat config.json without one was trained with this value (the dataclass default is the new one).
-LEGACY_DEFAULTS = {"loudness": False, "input_norm": "channel"}
+LEGACY_DEFAULTS = {"loudness": False, "input_norm": "channel", "speech_features": "librosa"}
+# Model fields added after the three-part config.json existed: a stored model section (config.json or a
+# checkpoint's meta) without one was trained with this value.
+MODEL_ADDED_FIELDS = {"speech_features": "librosa"}
 
 
 def _tuples(d: Mapping[str, Any]) -> dict:
@@ -243,6 +253,8 @@ class Config:
         parts = {}
         for part, kind in _PARTS.items():
             section = dict(d.get(part) or {})
+            if part == "model":
+                section = {**{k: v for k, v in MODEL_ADDED_FIELDS.items() if k not in section}, **section}
             bad = set(section) - _FIELDS[part]
             if bad:
                 raise ValueError(f"unknown ZeroEGGS {part} config fields: {sorted(bad)}")

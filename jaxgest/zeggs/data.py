@@ -103,14 +103,18 @@ def _time_resample(x: np.ndarray, frames: int) -> np.ndarray:
 
 
 def clip_sequences(clip: Clip, *, fps: float, mirror: bool = True, speeds: Sequence[float] = SPEEDS,
-                   min_frames: int = 2, loudness: bool = True) -> list[AlignedSequence]:
-    """All training sequences of one clip (original, mirrored; each at every speed)."""
+                   min_frames: int = 2, loudness: bool = True,
+                   speech_method: str = "authors") -> list[AlignedSequence]:
+    """All training sequences of one clip (original, mirrored; each at every speed); ``loudness`` and
+    ``speech_method`` are :func:`jaxgest.audio.speech_features`'s (the model's ``loudness`` and
+    ``speech_features``)."""
     from jaxgest.audio import speech_features
 
     if clip.audio is None:
         raise DataError(f"{clip.path}: no audio next to this clip (ZeroEGGS trains on speech + motion)")
     samples, sr = load_clip_audio(clip)
-    speech = np.asarray(speech_features(samples, sr=sr, fps=fps, loudness=loudness), np.float32)
+    speech = np.asarray(speech_features(samples, sr=sr, fps=fps, loudness=loudness, method=speech_method),
+                        np.float32)
     out = []
     variants = [("", clip.motion)] + ([("_mirror", kinematics.mirror(clip.motion))] if mirror else [])
     for suffix, motion in variants:
@@ -255,7 +259,8 @@ def style_window(sequences, i: int, rng, *, window: int, style_min: int, style_m
 
 def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Sequence[float] = SPEEDS,
           pose_stats: Optional[NormStats] = None, speech_stats: Optional[NormStats] = None,
-          progress: bool = False, loudness: bool = True, input_norm: str = "group") -> ZeggsData:
+          progress: bool = False, loudness: bool = True, input_norm: str = "group",
+          speech_method: str = "authors") -> ZeggsData:
     """Sequences of every clip and (unless given) the normalisation statistics fitted on them."""
     if not clips:
         raise DataError("no clips to train on")
@@ -267,7 +272,8 @@ def build(clips: Sequence[Clip], *, fps: float, mirror: bool = True, speeds: Seq
 
     seqs = []
     for c in tqdm(clips, desc="features", disable=not progress, leave=False):
-        seqs.extend(clip_sequences(c, fps=fps, mirror=mirror, speeds=speeds, loudness=loudness))
+        seqs.extend(clip_sequences(c, fps=fps, mirror=mirror, speeds=speeds, loudness=loudness,
+                                   speech_method=speech_method))
     if not seqs:
         raise DataError("every clip is too short to use")
     pose_stats = pose_stats or features.pose_statistics([s.pose for s in seqs], input_norm=input_norm)

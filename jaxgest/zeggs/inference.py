@@ -220,7 +220,8 @@ class TrainedZeggs:
             if sr is None:
                 raise JaxgestError("an audio array needs its sample rate")
         duration = len(y) / float(sr)
-        feats = speech_features(y, sr=sr, fps=self.cfg.model.fps, loudness=self.cfg.model.loudness)
+        feats = speech_features(y, sr=sr, fps=self.cfg.model.fps, loudness=self.cfg.model.loudness,
+                                method=self.cfg.model.speech_features)
         if len(feats) < 2:
             raise DataError(f"{audio if isinstance(audio, (str, pathlib.Path)) else 'audio'}: "
                             f"{duration:.3f} s of audio is too short to generate from")

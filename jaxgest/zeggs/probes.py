@@ -390,7 +390,8 @@ def leakage(model, clips, *, targets_per_clip: int = 3) -> dict:
     from jaxgest.zeggs import data as zdata
 
     cfg = model.cfg.model
-    seqs = [zdata.clip_sequences(c, fps=cfg.fps, mirror=False, speeds=(1.0,), loudness=cfg.loudness)[0] for c in clips]
+    seqs = [zdata.clip_sequences(c, fps=cfg.fps, mirror=False, speeds=(1.0,), loudness=cfg.loudness,
+                                  speech_method=cfg.speech_features)[0] for c in clips]
     T, M = model.cfg.train.window, model.cfg.train.style_window_max
     plan = leakage_plan(clips, [s.frames for s in seqs], window=T, style_len=M, targets_per_clip=targets_per_clip)
     if not plan:

@@ -95,7 +95,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
         a = tcfg.speed_augmentation
         data = zdata.build(clips, fps=model.fps, mirror=tcfg.mirror, speeds=(1 - a, 1.0, 1 + a) if a > 0 else (1.0,),
                            pose_stats=pose_stats, speech_stats=speech_stats, progress=progress, loudness=model.loudness,
-                           input_norm=model.input_norm)
+                           input_norm=model.input_norm, speech_method=model.speech_features)
         if data.pose_dim != model.pose_dim:
             raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {model.pose_dim}")
 

@@ -30,7 +30,7 @@ from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats
 from jaxgest.motion.skeleton import Motion
 from jaxgest.runtime.training import FORMAT_VERSION, Checkpointer, check_workdir_config, write_json_atomic
-from jaxgest.zeggs.config import Config, ModelConfig
+from jaxgest.zeggs.config import MODEL_ADDED_FIELDS, Config, ModelConfig
 from jaxgest.zeggs.model import param_shapes
 
 KIND = "zeggs"  # config.json "model" and the checkpoint kind
@@ -46,9 +46,10 @@ def checkpoint_config(model: ModelConfig) -> dict:
 
 def stored_checkpoint_config(config: Mapping[str, Any]) -> dict:
     """:func:`checkpoint_config` of a checkpoint's stored config: as is, or (a flat config of an earlier
-    version, with its ``preset`` key) mapped through :meth:`Config.from_dict`."""
-    if "pose_stats_shape" in config:
-        return dict(config)
+    version, with its ``preset`` key) mapped through :meth:`Config.from_dict`; a model field added since
+(:data:`MODEL_ADDED_FIELDS`) and missing takes the value the checkpoint was trained with."""
+    if "pose_stats_shape" in config:  # a model section: fields added since take the value it was trained with
+        return {**{k: v for k, v in MODEL_ADDED_FIELDS.items() if k not in config}, **config}
     flat = {k: v for k, v in config.items() if k != "preset"}
     try:
         return json.loads(json.dumps(checkpoint_config(Config.from_dict(flat).model)))  # lists, as stored

@@ -32,8 +32,9 @@ ZEGGS_CODE = OFFICIAL / "ZEGGS"
 #: (``audio`` in particular would shadow a project module of that name).
 _THEIR_MODULES = ("modules", "generate", "data_pipeline", "dataset", "helpers", "utils", "optimizers", "train",
                   "anim", "audio")
-#: The Python packages their generate / data pipeline import (from PyPI; torch is the [bench] extra).
-AUTHORS_PACKAGES = ("torch", "pandas", "omegaconf", "rich", "scipy", "pyloudnorm")
+#: The Python packages their generate / data pipeline import (from PyPI; jaxgest's [authors] extra). ``sox``
+#: (pysox) is imported by their ``audio/audio_files.py``; it calls the SoX program only to resample.
+AUTHORS_PACKAGES = ("torch", "pandas", "omegaconf", "rich", "scipy", "pyloudnorm", "sox")
 
 
 def missing_reason() -> str | None:
@@ -43,7 +44,7 @@ def missing_reason() -> str | None:
     missing = [p for p in AUTHORS_PACKAGES if importlib.util.find_spec(p) is None]
     if missing:
         return ("the authors' code needs " + ", ".join(missing)
-                + " (.ci/run installs them; pip install torch pandas omegaconf rich pyloudnorm)")
+                + " (.ci/run installs them; pip install 'jaxgest[authors]')")
     return None
 
 

@@ -375,8 +375,9 @@ def _flat_config(cfg) -> dict:
 
 def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, clips, tmp_path):
     """A workdir of an earlier version (one flat config dict in config.json and its checkpoints) loads; a model
-    trained before loudness normalisation and group input normalisation existed generates with unnormalised
-    speech and per-channel inputs, as it was trained."""
+    trained before loudness normalisation, group input normalisation and the authors' speech features existed
+    generates with unnormalised speech, per-channel inputs and librosa features, as it was trained. So does a
+    workdir of the current layout written before ``speech_features`` existed."""
     import shutil
 
     from jaxgest.zeggs.inference import load_model
@@ -384,9 +385,24 @@ def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, cli
     _, work, _ = trained
     new = load_model(work).cfg
     assert new.model.loudness is True and new.model.input_norm == "group" and new.model.fk_parents  # defaults
+    assert new.model.speech_features == "authors"
+    nested = tmp_path / "nested"  # the current layout, from before speech_features
+    shutil.copytree(work, nested)
+    meta = json.loads((nested / "config.json").read_text())
+    del meta["config"]["model"]["speech_features"]
+    (nested / "config.json").write_text(json.dumps(meta))
+    for path in nested.glob("checkpoints/zeggs/*/meta/metadata"):
+        stored = json.loads(path.read_text())
+        del stored["config"]["speech_features"]
+        path.write_text(json.dumps(stored))
+    model = load_model(nested)
+    assert model.cfg.model == new.model.replace(speech_features="librosa")
+    styles, audio = clips
+    assert np.all(np.isfinite(model.generate(audio, styles[:1]).rotations))
     old = tmp_path / "old"
     shutil.copytree(work, old)
-    new_fields = ("loudness", "input_norm", "fk_parents", "fk_offsets", "fk_translated", "w_predicted_position")
+    new_fields = ("loudness", "input_norm", "fk_parents", "fk_offsets", "fk_translated", "w_predicted_position",
+                  "speech_features")
     flat = {k: v for k, v in _flat_config(new).items() if k not in new_fields}
     meta = json.loads((old / "config.json").read_text())
     (old / "config.json").write_text(json.dumps({**meta, "config": flat}))
@@ -395,10 +411,10 @@ def test_workdir_from_before_a_new_config_field_keeps_its_behaviour(trained, cli
         path.write_text(json.dumps({**stored, "config": {"preset": "tiny", **flat}}))
     model = load_model(old)
     assert model.cfg.model.loudness is False and model.cfg.model.input_norm == "channel"
+    assert model.cfg.model.speech_features == "librosa"
     assert model.cfg.model.replace(loudness=True, input_norm="group", fk_parents=new.model.fk_parents,
-                                   fk_offsets=new.model.fk_offsets,
-                                   fk_translated=new.model.fk_translated) == new.model
-    styles, audio = clips
+                                   fk_offsets=new.model.fk_offsets, fk_translated=new.model.fk_translated,
+                                   speech_features="authors") == new.model
     assert np.all(np.isfinite(model.generate(audio, styles[:1]).rotations))
     # its checkpoints are compared field by field: resuming with today's defaults names what differs
     from jaxgest.zeggs.trainer import train

@@ -1,4 +1,7 @@
-"""Speech features (jaxgest.audio): shapes at the motion rate, spectral content, robustness, clear errors."""
+"""Speech features (jaxgest.audio): shapes at the motion rate, spectral content, robustness, clear errors.
+
+Checks of values written for the ``"librosa"`` method (log energy, natural-log mel) name it; the ``"authors"``
+method (the default) is checked against the authors' own code in tests/unit/test_authors_speech.py."""
 
 from __future__ import annotations
 
@@ -23,18 +26,19 @@ def tone(freq=1000.0, seconds=1.0, sr=SR, amp=0.5):
 def test_real_zeggs_wav(zeggs_dir):
     path = zeggs_dir / "067_Speech_2_x_1_0.wav"
     info = sf.info(str(path))
-    feats = audio.speech_features(path, fps=60)
+    feats = audio.speech_features(path, fps=60, method="librosa")
     assert feats.shape == (int(round(info.frames / info.samplerate * 60)), audio.FEATURE_DIM)
     assert feats.dtype == np.float32 and np.all(np.isfinite(feats))
     # Speech varies: energy spans a wide range and the log-mel channels are not constant.
     assert np.ptp(feats[:, -1]) > 5.0
     assert np.all(feats[:, :80].std(axis=0) > 0.1)
     # 30 fps gives half the frames of the same audio.
-    assert audio.speech_features(path, fps=30).shape[0] == int(round(info.frames / info.samplerate * 30))
+    assert audio.speech_features(path, fps=30, method="librosa").shape[0] == int(round(info.frames / info.samplerate * 30))
 
 
-def test_tone_peaks_in_its_mel_band():
-    feats = audio.speech_features(tone(1000.0), sr=SR, fps=60)
+@pytest.mark.parametrize("method", audio.SPEECH_METHODS)
+def test_tone_peaks_in_its_mel_band(method):
+    feats = audio.speech_features(tone(1000.0), sr=SR, fps=60, method=method)
     assert feats.shape == (60, 81)
     centres = librosa.mel_frequencies(n_mels=audio.N_MELS + 2, fmin=audio.FMIN, fmax=audio.FMAX)[1:-1]
     band = int(np.argmax(feats[30, :80]))
@@ -43,15 +47,16 @@ def test_tone_peaks_in_its_mel_band():
 
 def test_energy_follows_loudness():
     y = np.concatenate([tone(440, 0.5, amp=0.01), tone(440, 0.5, amp=0.5)])
-    e = audio.speech_features(y, sr=SR, fps=60)[:, -1]
+    e = audio.speech_features(y, sr=SR, fps=60, method="librosa")[:, -1]
     # 34 dB louder -> log energy up by 2 * ln(50) ~ 7.8
     assert e[45] - e[15] == pytest.approx(2 * np.log(50.0), abs=0.3)
 
 
 @pytest.mark.parametrize("y", [np.zeros(SR, np.float32), np.full(SR, 0.3, np.float32),
                                np.zeros(10, np.float32), np.ones(3, np.float32)], ids=["silence", "dc", "short", "tiny"])
-def test_degenerate_audio_is_finite(y):
-    feats = audio.speech_features(y, sr=SR, fps=60)
+@pytest.mark.parametrize("method", audio.SPEECH_METHODS)
+def test_degenerate_audio_is_finite(y, method):
+    feats = audio.speech_features(y, sr=SR, fps=60, method=method)
     assert feats.shape == (max(1, int(round(len(y) / SR * 60))), 81)
     assert np.all(np.isfinite(feats))
 
@@ -66,13 +71,13 @@ def test_flac_stereo_44k(tmp_path):
     np.testing.assert_allclose(y, 0.75 * mono, atol=1e-5)  # channels averaged (24-bit FLAC)
     y16, sr16 = audio.load_audio(path, sr=16000)
     assert sr16 == 16000 and len(y16) == 16000 and y16.dtype == np.float32
-    from_file = audio.speech_features(path, fps=60)
-    from_array = audio.speech_features(stereo, sr=44100, fps=60)
+    from_file = audio.speech_features(path, fps=60, method="librosa")
+    from_array = audio.speech_features(stereo, sr=44100, fps=60, method="librosa")
     assert from_file.shape == (60, 81)
     loud = from_array > np.log(audio.LOG_FLOOR) + 4  # quantisation noise only matters near the floor
     np.testing.assert_allclose(from_file[loud], from_array[loud], atol=0.05)
     # Resampled to 16 kHz first: the tone lands in the same band.
-    assert np.argmax(audio.speech_features(path, sr=16000)[30, :80]) == np.argmax(from_file[30, :80])
+    assert np.argmax(audio.speech_features(path, sr=16000, method="librosa")[30, :80]) == np.argmax(from_file[30, :80])
 
 
 def test_k_weighting_matches_the_bs1770_table_at_48k():
@@ -113,11 +118,11 @@ def test_loudness_normalisation():
     assert audio.integrated_loudness(z, SR) == pytest.approx(audio.LOUDNESS_LUFS, abs=1e-3)
     np.testing.assert_array_equal(audio.normalize_loudness(np.zeros(100, np.float32), SR), 0.0)
     # On by default: features do not depend on the recording level; off, they do (20 dB: energy + 2 ln 10).
-    a = audio.speech_features(y, sr=SR)
-    b = audio.speech_features(0.1 * y, sr=SR)
+    a = audio.speech_features(y, sr=SR, method="librosa")
+    b = audio.speech_features(0.1 * y, sr=SR, method="librosa")
     np.testing.assert_allclose(a, b, atol=1e-3)
-    raw_a = audio.speech_features(y, sr=SR, loudness=False)
-    raw_b = audio.speech_features(0.1 * y, sr=SR, loudness=False)
+    raw_a = audio.speech_features(y, sr=SR, loudness=False, method="librosa")
+    raw_b = audio.speech_features(0.1 * y, sr=SR, loudness=False, method="librosa")
     assert np.median(raw_a[:, -1] - raw_b[:, -1]) == pytest.approx(2 * np.log(10.0), abs=0.05)  # log energy
 
 

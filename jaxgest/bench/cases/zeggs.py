@@ -16,9 +16,10 @@ depend on the values). Inputs are random speech embeddings / pose features / a u
 * ``zeggs_style_encoder_b{1,32}``: posterior of a 512-frame style clip (the longest training window),
   ``jit`` vs eager. Per pose = per style frame.
 * ``zeggs_speech_encoder_b1``: speech encoder on 10 s (600 frames), ``jit`` vs eager.
-* ``zeggs_speech_features``: :func:`jaxgest.audio.speech_features` (librosa STFT + mel, NumPy only) on
-  10 s of 16 kHz speech-like audio; frames = 600 output frames at 60 fps, ``per_frame_us`` x 60 = cost per
-  second of audio.
+* ``zeggs_speech_features``: :func:`jaxgest.audio.speech_features` ``method="librosa"`` (librosa STFT + mel,
+  NumPy only; the method of models trained before the authors' one) on 10 s of 16 kHz speech-like audio;
+  frames = 600 output frames at 60 fps, ``per_frame_us`` x 60 = cost per second of audio.
+  ``zeggs_speech_features_authors``: the same with ``method="authors"`` (the default of new models).
 """
 
 from __future__ import annotations
@@ -181,14 +182,15 @@ def speech_like_audio(seconds: float, sr: int = AUDIO_SR, seed: int = 0) -> np.n
     return (0.3 * envelope * voiced + 0.01 * rng.normal(size=t.shape)).astype(np.float32)
 
 
-def speech_features_case(seconds: float = AUDIO_SECONDS) -> Case:
+def speech_features_case(seconds: float = AUDIO_SECONDS, method: str = "librosa") -> Case:
     from jaxgest.audio import speech_features
 
     frames = int(round(seconds * CFG.fps))
-    return Case(name="zeggs_speech_features", batch=1, frames=frames,
-                impls=[Impl("numpy", lambda y: speech_features(y, sr=AUDIO_SR, fps=CFG.fps))],
+    return Case(name="zeggs_speech_features" + ("" if method == "librosa" else f"_{method}"), batch=1,
+                frames=frames,
+                impls=[Impl("numpy", lambda y: speech_features(y, sr=AUDIO_SR, fps=CFG.fps, method=method))],
                 make_args=lambda: (speech_like_audio(seconds),),
-                note=f"jaxgest.audio.speech_features (librosa) on {seconds:g} s of {AUDIO_SR} Hz audio -> "
+                note=f"jaxgest.audio.speech_features ({method}) on {seconds:g} s of {AUDIO_SR} Hz audio -> "
                      f"{frames} frames; per second of audio = per_frame_us x {CFG.fps:g}")
 
 
@@ -206,4 +208,5 @@ def cases(quick: bool) -> list:
         style_case(32, quick=False),
         speech_encoder_case(),
         speech_features_case(),
+        speech_features_case(method="authors"),
     ]

@@ -31,24 +31,47 @@ from jaxgest.zeggs.official import quat
 
 GAZE_DISTANCE = 100.0  # cm: "assume other actor is one meter away" (theirs)
 REQUIRED_JOINTS = ("Hips", "Spine2", "Head")
+ZEGGS_JOINTS = {"hips": "Hips", "spine": "Spine2", "head": "Head"}
+
+
+def root_joints(skeleton) -> dict[str, str]:
+    """The joints that define the root and the gaze: the ZEGGS rig's ``Hips`` / ``Spine2`` / ``Head`` where it
+    has them (the authors' choice); on another rig the hips and the second spine joint of
+    :class:`jaxgest.zeggs.features.RootSpec` and the first joint named ``*head*`` (our generalisation)."""
+    names = list(skeleton.names)
+    if all(n in names for n in REQUIRED_JOINTS):
+        return dict(ZEGGS_JOINTS)
+    from jaxgest.zeggs.features import RootSpec
+
+    spec = RootSpec.for_skeleton(skeleton)
+    head = next((n for n in names if "head" in n.lower()), None)
+    if head is None:
+        raise DataError(f"the rig has no joint named like 'Head' (joints: {', '.join(names[:8])}, ...): the "
+                        "authors' features need one for the gaze")
+    return {"hips": spec.hips, "spine": spec.spine, "head": head}
 
 
 def _extrapolate_first(x: np.ndarray) -> None:
     x[0] = x[1] - (x[3] - x[2])
 
 
-def pose_state(motion: Motion) -> dict[str, np.ndarray]:
+def pose_state(motion: Motion, joints: dict | None = None) -> dict[str, np.ndarray]:
     """The authors' features of ``motion`` (float64): ``root_pos (F, 3)``, ``root_rot (F, 4)``, ``root_vel``,
     ``root_vrt (F, 3)``, ``lpos (F, J, 3)``, ``lrot (F, J, 4)``, ``ltxy (F, J, 2, 3)``, ``lvel``, ``lvrt
     (F, J, 3)``, ``gaze_pos (F, 3)`` (constant) and ``gaze_dir (F, 3)``. Needs 4 frames or more.
+    ``joints``: ``{"hips", "spine", "head"}`` names (default: :func:`root_joints` of the clip's rig).
     References: the authors' ``data_pipeline.preprocess_animation``; Ghorbani et al. 2023, §3.2-3.3.
     """
     names = list(motion.skeleton.names)
-    missing = [n for n in REQUIRED_JOINTS if n not in names]
     name = motion.name or "clip"
+    try:
+        joints = joints or root_joints(motion.skeleton)
+    except DataError as e:
+        raise DataError(f"{name}: {e}") from None
+    missing = [n for n in joints.values() if n not in names]
     if missing:
-        raise DataError(f"{name}: the ZeroEGGS authors' features need the ZEGGS rig's joints "
-                        f"{', '.join(REQUIRED_JOINTS)}; missing {', '.join(missing)}")
+        raise DataError(f"{name}: the authors' features need the joints {', '.join(joints.values())}; "
+                        f"missing {', '.join(missing)}")
     if motion.num_frames < 4:
         raise DataError(f"{name}: {motion.num_frames} frames; the authors' velocities need at least 4")
     parents = [int(p) for p in motion.skeleton.parents]
@@ -59,13 +82,13 @@ def pose_state(motion: Motion) -> dict[str, np.ndarray]:
     lpos = np.array(motion.translations, np.float64, copy=True)
     grot, gpos = quat.fk(lrot, lpos, parents)
 
-    root_pos = gpos[:, names.index("Spine2")] * np.array([1.0, 0.0, 1.0])
-    root_fwd = quat.mul_vec(grot[:, names.index("Hips")], np.array([[0.0, 0.0, 1.0]]))
+    root_pos = gpos[:, names.index(joints["spine"])] * np.array([1.0, 0.0, 1.0])
+    root_fwd = quat.mul_vec(grot[:, names.index(joints["hips"])], np.array([[0.0, 0.0, 1.0]]))
     root_fwd[:, 1] = 0.0
     root_fwd = root_fwd / np.sqrt(np.sum(root_fwd * root_fwd, axis=-1))[..., None]
     root_rot = quat.normalize(quat.between(np.array([[0.0, 0.0, 1.0]]).repeat(len(root_fwd), 0), root_fwd))
 
-    look = quat.mul_vec(grot[:, names.index("Head")], np.array([0.0, 0.0, 1.0]))
+    look = quat.mul_vec(grot[:, names.index(joints["head"])], np.array([0.0, 0.0, 1.0]))
     look[:, 1] = 0.0
     look = look / np.sqrt(np.sum(np.square(look), axis=-1))[..., None]
     gaze_pos = np.median(root_pos + GAZE_DISTANCE * look, axis=0)[None].repeat(len(root_pos), 0)

@@ -62,6 +62,7 @@ class OfficialZeggs:
         self.label_names = list(m["label_names"])
         self.bone_names = tuple(m["bone_names"])
         self.example_based = release.example_based
+        self.joints = dict(m.get("root_joints", features.ZEGGS_JOINTS))
         self.params = {k: {n: jnp.asarray(a) for n, a in v.items()} for k, v in release.params.items()}
         self.stats = {k: jnp.asarray(v) for k, v in release.stats.items()}
         self._speech = jax.jit(network.speech_encoder)
@@ -103,7 +104,7 @@ class OfficialZeggs:
 
     def style_input(self, motion: Motion) -> np.ndarray:
         """The style encoder's normalised input ``(F, 9 + 15 J)`` of an example clip (gaze slot zero)."""
-        vec = features.pose_vector(features.pose_state(self.clip(motion)), gaze=False)
+        vec = features.pose_vector(features.pose_state(self.clip(motion), self.joints), gaze=False)
         vec = np.concatenate([vec, np.zeros((len(vec), 3))], axis=1)
         s = self.release.stats
         return ((vec - s["anim_input_mean"]) / s["anim_input_std"]).astype(np.float32)
@@ -171,7 +172,7 @@ class OfficialZeggs:
         audio, sr = audio_input(audio, sr)
         e = np.tensordot(w, np.stack(self.style_embeddings(styles, seed=seed, temperature=temperature)), axes=1)
         speech = self.speech(audio, sr)
-        state = features.pose_state(first)
+        state = features.pose_state(first, self.joints)
         return self.decode(speech, e, state, name=name, template=first)
 
     def decode(self, speech: np.ndarray, style: np.ndarray, state: dict, *, name: str, template: Motion) -> Motion:

@@ -74,12 +74,27 @@ def _layer_norm(p: Params, name: str, x):
     return y * _row(p[f"{name}.weight"], y) + _row(p[f"{name}.bias"], y)
 
 
-def speech_encoder(p: Params, x):
-    """Normalised speech features ``(B, T, 81)`` -> speech encoding ``(B, T, 64)`` (``modules.SpeechEncoder``)."""
-    for name in ("layer0", "layer1"):
+def dropout(x, rate: float, key):
+    """Inverted dropout (PyTorch's ``nn.Dropout`` in training); identity when ``key`` is None (inference)."""
+    if key is None or rate == 0.0:
+        return x
+    keep = jax.random.bernoulli(key, 1.0 - rate, x.shape)
+    return jnp.where(keep, x / (1.0 - rate), jnp.zeros_like(x))
+
+
+def _keys(key, n: int):
+    return [None] * n if key is None else list(jax.random.split(key, n))
+
+
+def speech_encoder(p: Params, x, key=None):
+    """Normalised speech features ``(B, T, 81)`` -> speech encoding ``(B, T, 64)`` (``modules.SpeechEncoder``);
+    ``key``: training (dropout 0.2 after each convolution), None: inference."""
+    keys = _keys(key, 2)
+    for i, name in enumerate(("layer0", "layer1")):
         k = p[f"{name}.weight"].shape[-1]
         left = (k - 1) // 2
         x = jax.nn.elu(_conv(x, p[f"{name}.weight"], p[f"{name}.bias"], left, k - 1 - left, "replicate"))
+        x = dropout(x, 0.2, keys[i])
     return jax.nn.elu(_linear(p, "layer2", x))
 
 
@@ -93,8 +108,9 @@ def positions(frames: int, dim: int) -> np.ndarray:
     return pe
 
 
-def _attention(p: Params, name: str, x, heads: int):
-    """``nn.MultiheadAttention`` self-attention of ``(B, T, E)`` (no mask; dropout off)."""
+def _attention(p: Params, name: str, x, heads: int, key=None):
+    """``nn.MultiheadAttention`` self-attention of ``(B, T, E)`` (no mask; dropout 0.1 on the attention
+    weights in training)."""
     B, T, E = x.shape
     qkv = x @ p[f"{name}.in_proj_weight"].T
     qkv = qkv + _row(p[f"{name}.in_proj_bias"], qkv)
@@ -102,24 +118,28 @@ def _attention(p: Params, name: str, x, heads: int):
     d = E // heads
     q, k, v = (a.reshape(B, T, heads, d) for a in (q, k, v))
     logits = jnp.einsum("bqhd,bkhd->bhqk", q / math.sqrt(d), k, precision=jax.lax.Precision.HIGHEST)
-    out = jnp.einsum("bhqk,bkhd->bqhd", jax.nn.softmax(logits, axis=-1), v, precision=jax.lax.Precision.HIGHEST)
+    weights = dropout(jax.nn.softmax(logits, axis=-1), 0.1, key)
+    out = jnp.einsum("bhqk,bkhd->bqhd", weights, v, precision=jax.lax.Precision.HIGHEST)
     return _linear(p, f"{name}.out_proj", out.reshape(B, T, E))
 
 
-def style_encoder(p: Params, x, *, heads: int = 4):
-    """Normalised example features ``(B, T, 9 + 15 J)`` -> ``(mu, logvar)``, each ``(B, D_e)``."""
+def style_encoder(p: Params, x, *, heads: int = 4, key=None):
+    """Normalised example features ``(B, T, 9 + 15 J)`` -> ``(mu, logvar)``, each ``(B, D_e)``; ``key``:
+    training (dropout 0.2 after each convolution block, 0.1 in the FFT block), None: inference."""
     e = "encoder"
+    keys = _keys(key, 5)
     h = x
-    for conv, norm in (("convs.0", "convs.2"), ("convs.4", "convs.6")):
+    for i, (conv, norm) in enumerate((("convs.0", "convs.2"), ("convs.4", "convs.6"))):
         h = jax.nn.relu(_conv(h, p[f"{e}.{conv}.conv.weight"], p[f"{e}.{conv}.conv.bias"], 1, 1))
-        h = _layer_norm(p, f"{e}.{norm}", h)
+        h = dropout(_layer_norm(p, f"{e}.{norm}", h), 0.2, keys[i])
     h = h + positions(h.shape[1], h.shape[2])[None]
     blk = f"{e}.blocks.0"
-    a = _attention(p, f"{blk}.attention.multi_head_attention", h, heads)
+    a = dropout(_attention(p, f"{blk}.attention.multi_head_attention", h, heads, keys[2]), 0.1, keys[3])
     h = _layer_norm(p, f"{blk}.attention.layer_norm", a + h)
     f = jax.nn.relu(_conv(h, p[f"{blk}.feed_forward.convs.0.conv.weight"], p[f"{blk}.feed_forward.convs.0.conv.bias"],
                           1, 1))
     f = _conv(f, p[f"{blk}.feed_forward.convs.2.conv.weight"], p[f"{blk}.feed_forward.convs.2.conv.bias"], 1, 1)
+    f = dropout(f, 0.1, keys[4])
     h = _layer_norm(p, f"{blk}.feed_forward.layer_norm", f + h)
     pooled = jnp.mean(h, axis=1)
     half = pooled.shape[-1] // 2

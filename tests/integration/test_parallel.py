@@ -10,6 +10,10 @@ The test process has 4 fake CPU devices (tests/conftest.py, ``jax_num_cpu_device
   settings (tests/helpers/tiny_models.py) end with the parameters and losses of the session's 1-device models
   (tests/conftest.py), and config.json / metrics.jsonl record the 4 devices.
 
+The gradient's scale: Adam is blind to it (a 4x gradient makes nearly the same update), so one plain-SGD step
+of each TGST stage is compared on 1 and 4 devices, and ZeroEGGS' RAdam is checked to see the scale in the
+steps its strict first-checkpoint comparison covers.
+
 One true multi-process run remains (marked slow): 2 processes x 2 devices joined by ``jax.distributed``
 (``JAX_COORDINATOR_ADDRESS`` on localhost), each host reading only its block of the batch, in subprocesses
 whose ``XLA_FLAGS`` give each 2 devices. The remaining in-process tests cover the mesh API and its errors.
@@ -37,8 +41,11 @@ from jaxgest.runtime import parallel
 from jaxgest.runtime.errors import JaxgestError
 from jaxgest.tgst.config import preset as tgst_preset
 from jaxgest.zeggs.config import preset as zeggs_preset
-from jaxgest.runtime.training import TrainState
+from jaxgest.runtime.training import TrainState, bare_state, jit_config_step
+from jaxgest.tgst.steps import make_ae_train_step, make_transformer_train_step
+from jaxgest.zeggs import steps as zeggs_steps
 
+import tgst_testing
 from faults_testing import params_at
 from tiny_models import CKPT_EVERY, TGST_STEPS, ZEGGS_STEPS, train_tgst, train_zeggs
 
@@ -316,6 +323,113 @@ def test_real_models_train_on_four_devices_like_one(real_runs, tgst_workdir, zeg
         _assert_same_checkpoint(one, four, stage, step)
         if ADAM_NOISE.get(stage, {}).get("strict_first_checkpoint"):
             _assert_same_checkpoint(one, four, stage, CKPT_EVERY, strict=True)
+
+
+# ----- the gradient's scale ---------------------------------------------------------------------------------
+#
+# Adam (TGST's optimiser) divides each gradient element by its own running magnitude, so a gradient 4x too
+# large (a cross-device SUM where the mean belongs) trains nearly the same parameters: with such a bug the
+# TGST real-model comparison above fails only by luck (its losses 1.08e-5 apart against rtol 1e-5). With SGD
+# the update is -lr * gradient, so its scale shows: one step of TGST's own steps (their losses,
+# ``make_update_step``), compiled as the trainer compiles them (``jit_config_step``: state replicated, batch
+# split), with plain SGD at lr 1 (the update IS minus the gradient) in place of Adam, on 1 and on 4 devices.
+# ZeroEGGS needs no SGD run (its step compiles for ~15-40 s): RAdam's first steps apply the bias-corrected
+# momentum without the adaptive denominator, so the ZeroEGGS comparison above (first checkpoint STRICT, losses
+# rtol 1e-4) sees a 4x gradient (measured: 3 of its 4 losses 4.6 % apart); the last test here keeps it so.
+
+SGD = optax.sgd(1.0)
+
+
+def _sgd_ae_step(state, batch, key, cfg):
+    state, metrics = make_ae_train_step(cfg, SGD)(state.replace(tx=SGD), batch, key)
+    return bare_state(state), metrics
+
+
+def _sgd_transformer_step(state, batch, key, ae_params, cfg):
+    state, metrics = make_transformer_train_step(cfg, SGD, ae_params)(state.replace(tx=SGD), batch, key)
+    return bare_state(state), metrics
+
+
+def _sgd_problem(kind: str):
+    """(step function, config, params, batch, extra step arguments) of a TGST stage; batch divisible by 4."""
+    if kind == "tgst_autoencoder":
+        params = tgst_testing.random_params(0)["autoencoder"]
+        batch = {"upper": tgst_testing.smooth_motion(10, 4, 32, 39),
+                 "lower": tgst_testing.smooth_motion(11, 4, 32, 24)}
+        return _sgd_ae_step, tgst_testing.FULL, params, batch, ()
+    p = tgst_testing.random_params(0)
+    batch = {"content": tgst_testing.smooth_motion(12, 4, 32, 39),
+             "style": tgst_testing.smooth_motion(13, 4, 32, 39)}
+    return _sgd_transformer_step, tgst_testing.FULL, p["transformer"], batch, (p["autoencoder"],)
+
+
+def _sgd_update(kind: str, devices: int):
+    """(minus the gradient of one step, as {leaf path: array}, and the step's loss) on ``devices`` devices."""
+    step_fn, cfg, params, batch, extra = _sgd_problem(kind)
+    leaves = lambda tree: {jax.tree_util.keystr(k): np.array(v)  # noqa: E731
+                           for k, v in jax.tree_util.tree_flatten_with_path(jax.device_get(tree))[0]}
+    before = leaves(params)
+    mesh = parallel.make_mesh(devices)
+    params = jax.tree_util.tree_map(jnp.copy, params)  # the step donates the state; the fixtures' stay intact
+    state = parallel.replicate(bare_state(TrainState.create(apply_fn=None, params=params, tx=SGD)), mesh)
+    step = jit_config_step(step_fn, mesh, cfg, extra_args=len(extra))
+    new, metrics = step(state, parallel.shard_batch(batch, mesh), jax.random.key(1),
+                        *(parallel.replicate(e, mesh) for e in extra))
+    after = leaves(new.params)
+    return {k: after[k] - before[k] for k in after}, float(metrics["loss"])
+
+
+def _assert_same_update(one: dict, four: dict, what: str) -> None:
+    """Two SGD updates agree: global norms within 0.1 % (a sum over 4 devices would be 4x, a mean over one
+    device's block of the batch anything), every element within 1e-3 relative + 1e-5 of the largest element
+    (the rounding of the cross-device sums)."""
+    def norm(update):
+        return float(np.sqrt(sum(np.sum(np.square(v, dtype=np.float64)) for v in update.values())))
+
+    assert sorted(one) == sorted(four)
+    n1, n4 = norm(one), norm(four)
+    assert n1 > 0 and abs(n4 / n1 - 1) < 1e-3, f"{what}: gradient norm on 4 devices / on 1 = {n4 / n1:.6g}"
+    scale = max(float(np.max(np.abs(v))) for v in one.values())
+    for k in one:
+        np.testing.assert_allclose(four[k], one[k], rtol=1e-3, atol=1e-5 * scale, err_msg=f"{what} {k}")
+
+
+@pytest.mark.parametrize("kind", ["tgst_autoencoder", "tgst_transformer"])
+def test_gradient_scale_on_four_devices_equals_one(kind):
+    """One plain-SGD step of each TGST stage's own step function on 4 devices moves the parameters by
+    exactly the 1-device update (the gradient of the mean over the global batch), not 4x nor 1/4 of it."""
+    one, loss1 = _sgd_update(kind, 1)
+    four, loss4 = _sgd_update(kind, 4)
+    np.testing.assert_allclose(loss4, loss1, rtol=1e-5)
+    _assert_same_update(one, four, kind)
+
+
+def test_gradient_scale_check_can_fail():
+    """Controls: the SGD comparison refuses a 4x (or 1/4) gradient, which Adam's first update hides."""
+    one = {"w": np.array([0.3, -1.2, 0.01], np.float32), "b": np.array([2.0], np.float32)}
+    for factor in (4.0, 0.25):
+        with pytest.raises(AssertionError, match="gradient norm"):
+            _assert_same_update(one, {k: factor * v for k, v in one.items()}, "scaled")
+    adam = optax.adam(1e-3)
+    grads = {k: jnp.asarray(v) for k, v in one.items()}
+    step = lambda g: adam.update(g, adam.init(grads))[0]  # noqa: E731
+    scaled = step({k: 4 * v for k, v in grads.items()})
+    for k in one:  # Adam moves the same for a 4x gradient: why the Adam runs above cannot catch it
+        np.testing.assert_allclose(scaled[k], step(grads)[k], rtol=1e-4)
+
+
+def test_zeggs_first_steps_see_the_gradient_scale():
+    """ZeroEGGS's optimiser (RAdam) moves 4x as far for a 4x gradient in every step up to the strictly
+    compared first checkpoint (CKPT_EVERY), so that comparison catches a gradient of the wrong scale."""
+    tx = zeggs_steps.make_optimizer(zeggs_preset("tiny"))
+    params = {"w": jnp.array([0.3, -1.2, 0.01, 2.0])}
+    grads = [{"w": jnp.array([0.5, -0.1, 1e-3, 2.0]) * (1 + i)} for i in range(CKPT_EVERY)]
+    states = {1.0: tx.init(params), 4.0: tx.init(params)}
+    for g in grads:
+        moved = {}
+        for factor, state in states.items():
+            moved[factor], states[factor] = tx.update({"w": factor * g["w"]}, state, params)
+        np.testing.assert_allclose(moved[4.0]["w"], 4 * moved[1.0]["w"], rtol=1e-5)
 
 
 def _python_names(path: pathlib.Path) -> list:

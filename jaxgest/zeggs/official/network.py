@@ -108,7 +108,7 @@ def positions(frames: int, dim: int) -> np.ndarray:
     return pe
 
 
-def _attention(p: Params, name: str, x, heads: int, key=None):
+def _attention(p: Params, name: str, x, heads: int, key=None, mask=None):
     """``nn.MultiheadAttention`` self-attention of ``(B, T, E)`` (no mask; dropout 0.1 on the attention
     weights in training)."""
     B, T, E = x.shape
@@ -118,30 +118,40 @@ def _attention(p: Params, name: str, x, heads: int, key=None):
     d = E // heads
     q, k, v = (a.reshape(B, T, heads, d) for a in (q, k, v))
     logits = jnp.einsum("bqhd,bkhd->bhqk", q / math.sqrt(d), k, precision=jax.lax.Precision.HIGHEST)
+    if mask is not None:  # padded frames are no keys (their key_padding_mask)
+        logits = jnp.where(mask[:, None, None, :], logits, jnp.asarray(-1e30, logits.dtype))
     weights = dropout(jax.nn.softmax(logits, axis=-1), 0.1, key)
     out = jnp.einsum("bhqk,bkhd->bqhd", weights, v, precision=jax.lax.Precision.HIGHEST)
     return _linear(p, f"{name}.out_proj", out.reshape(B, T, E))
 
 
-def style_encoder(p: Params, x, *, heads: int = 4, key=None):
+def style_encoder(p: Params, x, *, heads: int = 4, key=None, mask=None):
     """Normalised example features ``(B, T, 9 + 15 J)`` -> ``(mu, logvar)``, each ``(B, D_e)``; ``key``:
-    training (dropout 0.2 after each convolution block, 0.1 in the FFT block), None: inference."""
+    training (dropout 0.2 after each convolution block, 0.1 in the FFT block), None: inference.
+
+    ``mask (B, T)`` (True = a real frame, real frames first): examples of several lengths padded to one (a
+    single compilation). Padded frames are zeroed before every convolution -- exactly the zero padding the
+    clip has alone -- are no attention keys and are left out of the mean, so each clip gets the values it
+    gets alone (as their ``masked_fill`` / ``key_padding_mask``)."""
     e = "encoder"
     keys = _keys(key, 5)
-    h = x
+    m = jnp.ones(x.shape[:2], x.dtype) if mask is None else mask.astype(x.dtype)
+    m3 = m[..., None]
+    h = x * m3
     for i, (conv, norm) in enumerate((("convs.0", "convs.2"), ("convs.4", "convs.6"))):
         h = jax.nn.relu(_conv(h, p[f"{e}.{conv}.conv.weight"], p[f"{e}.{conv}.conv.bias"], 1, 1))
-        h = dropout(_layer_norm(p, f"{e}.{norm}", h), 0.2, keys[i])
-    h = h + positions(h.shape[1], h.shape[2])[None]
+        h = dropout(_layer_norm(p, f"{e}.{norm}", h), 0.2, keys[i]) * m3
+    h = (h + positions(h.shape[1], h.shape[2])[None]) * m3
     blk = f"{e}.blocks.0"
-    a = dropout(_attention(p, f"{blk}.attention.multi_head_attention", h, heads, keys[2]), 0.1, keys[3])
-    h = _layer_norm(p, f"{blk}.attention.layer_norm", a + h)
+    a = _attention(p, f"{blk}.attention.multi_head_attention", h, heads, keys[2], None if mask is None else mask)
+    a = dropout(a, 0.1, keys[3])
+    h = _layer_norm(p, f"{blk}.attention.layer_norm", a + h) * m3
     f = jax.nn.relu(_conv(h, p[f"{blk}.feed_forward.convs.0.conv.weight"], p[f"{blk}.feed_forward.convs.0.conv.bias"],
-                          1, 1))
+                          1, 1)) * m3
     f = _conv(f, p[f"{blk}.feed_forward.convs.2.conv.weight"], p[f"{blk}.feed_forward.convs.2.conv.bias"], 1, 1)
     f = dropout(f, 0.1, keys[4])
-    h = _layer_norm(p, f"{blk}.feed_forward.layer_norm", f + h)
-    pooled = jnp.mean(h, axis=1)
+    h = _layer_norm(p, f"{blk}.feed_forward.layer_norm", f + h) * m3
+    pooled = jnp.sum(h, axis=1) / jnp.maximum(jnp.sum(m3, axis=1), 1.0)
     half = pooled.shape[-1] // 2
     return pooled[:, :half], pooled[:, half:]
 

@@ -274,7 +274,13 @@ def batch(seq: Sequences, step: int, *, seed: int, batch_size: int, window: int,
         examples.append(_example(seq, w0, window, (s, e), max(length, window)))
     idx = np.stack(idx)
     out = {k: v[idx] for k, v in seq.state.items()}
-    out.update(audio=seq.audio[idx], gaze_pos=seq.gaze_pos[idx], example=np.stack(examples).astype(np.float32))
+    # every step's examples padded to the longest possible length, with a mask: one compiled step
+    longest = max(2 * example_length, window)
+    ex = np.zeros((batch_size, longest, examples[0].shape[1]), np.float32)
+    mask = np.zeros((batch_size, longest), bool)
+    for i, e in enumerate(examples):
+        ex[i, :len(e)], mask[i, :len(e)] = e, True
+    out.update(audio=seq.audio[idx], gaze_pos=seq.gaze_pos[idx], example=ex, example_mask=mask)
     return out
 
 
@@ -296,7 +302,7 @@ def loss_fn(params, batch_, key, step, *, stats, parents, dt: float, cond: str):
     audio = (batch_["audio"] - stats["audio_input_mean"][None, None]) / stats["audio_input_std"]
     speech = network.speech_encoder(params["speech_encoder"], audio, key=k_speech)
     example = (batch_["example"] - stats["anim_input_mean"][None, None]) / stats["anim_input_std"][None, None]
-    mu, logvar = network.style_encoder(params["style_encoder"], example, key=k_style)
+    mu, logvar = network.style_encoder(params["style_encoder"], example, key=k_style, mask=batch_["example_mask"])
     e = mu + jnp.exp(0.5 * logvar) * jax.random.normal(k_eps, mu.shape)
     T = audio.shape[1]
     state0 = {k: batch_[k][:, 0] for k in network.STATE_KEYS}
@@ -306,7 +312,7 @@ def loss_fn(params, batch_, key, step, *, stats, parents, dt: float, cond: str):
     terms = losses.reconstruction_terms(out, target, batch_["gaze_pos"], parents, dt)
     kl = losses.kl_divergence(mu, logvar)
     loss = losses.total_loss(terms, kl, step)
-    return loss, {**terms, "kl": kl, "kl_weight": losses.kl_weight(step)}
+    return loss, {"loss": loss, **terms, "kl": kl, "kl_weight": losses.kl_weight(step)}
 
 
 def _step(state, batch_, key, stats, static: tuple):

@@ -68,7 +68,8 @@ def register(subparsers) -> None:
                    help="probes and leakage only (skip beat alignment and the Fréchet distance)")
     e.add_argument("--html", default=None, metavar="DIR",
                    help="also write 3D viewer pages of the best, median and worst generated test clips "
-                   "(DIR/best.html, ...; ranked by BeatAlign minus its shuffled control)")
+                   "(DIR/best.html, ...; ranked by BeatAlign minus its shuffled control), each playing the "
+                   "clip's speech")
     e.add_argument("--claims", action="store_true",
                    help="the paper's claims on the generated motion instead of the diagnostics: style portrayal, "
                    "realism and appropriateness against GT and MM on --heldout data (zero-shot for the model's "

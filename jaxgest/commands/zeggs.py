@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import pathlib
 
-from jaxgest.commands.common import add_train_arguments, overrides, training_data
+from jaxgest.commands.common import add_train_arguments, overrides, training_data, watch_arguments
 from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.zeggs.config import PRESETS
 from jaxgest.zeggs.claims import SPEECH_STYLES, SUBSTITUTES
@@ -105,7 +105,7 @@ def _train(args) -> int:
     data = training_data(args)  # steps and intervals checked before any data is written
     r = train(data, args.workdir, preset=args.preset, steps=args.steps,
               seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-              overrides=changes)
+              overrides=changes, **watch_arguments(args))
     final = r["final"]
     if r["start_step"] >= r["steps"]:
         if r["start_step"] == 0:
@@ -115,7 +115,8 @@ def _train(args) -> int:
                   "nothing to do (raise --steps to continue)")
         return 0
     print(f"zeggs: trained {r['steps']} steps (resumed from {r['start_step']}) on {r['devices']} device(s) in "
-          f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}; workdir {args.workdir}")
+          f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}"
+          + (f" (held-out {final['eval_loss']:.4g})" if "eval_loss" in final else "") + f"; workdir {args.workdir}")
     return 0
 
 

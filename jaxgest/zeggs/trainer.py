@@ -72,7 +72,7 @@ def _heldout_metrics(params, batch, step, key, stats, cfg: Config) -> dict:
     return {k: jnp.mean(v) for k, v in terms.items()}
 
 
-def _heldout_data(eval_data, skeleton, data, model, tcfg, progress):
+def _heldout_data(eval_data, skeleton, data, model, progress):
     """The held-out clips of ``eval_data`` as training data, normalised with the training statistics."""
     clips = [c for c in load_folder(eval_data, progress=progress) if c.audio is not None]
     if not clips:
@@ -80,10 +80,9 @@ def _heldout_data(eval_data, skeleton, data, model, tcfg, progress):
     for c in clips:
         if c.motion.skeleton.signature() != skeleton.signature():
             raise DataError(f"{c.path}: held-out clip on another skeleton than the training data")
-    heldout = zdata.build(clips, fps=model.fps, mirror=False, speeds=(1.0,), pose_stats=data.pose_stats,
-                          speech_stats=data.speech_stats, progress=progress, loudness=model.loudness,
-                          input_norm=model.input_norm)
-    return heldout
+    return zdata.build(clips, fps=model.fps, mirror=False, speeds=(1.0,), pose_stats=data.pose_stats,
+                       speech_stats=data.speech_stats, progress=progress, loudness=model.loudness,
+                       input_norm=model.input_norm)
 
 
 def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = None, seed: int = 0,
@@ -130,7 +129,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
             raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {model.pose_dim}")
         heldout = None
         if eval_data is not None:
-            heldout = _heldout_data(eval_data, skeleton, data, model, tcfg, progress)
+            heldout = _heldout_data(eval_data, skeleton, data, model, progress)
 
         mesh = parallel.make_mesh(devices)
         info = parallel.device_info(mesh)

@@ -22,7 +22,7 @@ import contextlib
 import io
 import sys
 
-from jaxgest.commands import bench, data, demo, tgst, zeggs
+from jaxgest.commands import bench, data, demo, plot, tgst, zeggs
 from jaxgest.runtime.errors import Interrupted, JaxgestError
 
 # Modules that contribute subcommands, in help order (each imports its heavy parts inside its commands).
@@ -31,6 +31,7 @@ COMMAND_MODULES = (
     tgst,  # tgst ...
     zeggs,  # zeggs ...
     demo,  # demo, pipeline
+    plot,  # plot (training curves)
     bench,  # bench
 )
 

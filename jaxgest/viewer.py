@@ -16,6 +16,10 @@ Playback is by time: clips of different lengths and frame rates stay synchronise
 ``data-ready="1"`` on ``<html>`` once it has drawn and exposes ``window.jaxgestViewer`` (``info()``,
 ``setTime(t)``, ``position(clip, frame, joint)``) and a JSON status element ``#jaxgest-status`` for tests;
 URL hash parameters (``#t=1.5&paused=1&view=side&overlay=1&trails=1``) set the initial state.
+
+Speech (``audio=``, ``jaxgest render ... --audio A.wav``) is embedded as a ``data:`` URI that an ``<audio>``
+element plays; the page's policy then allows ``media-src data:`` and nothing else. See :func:`encode_audio`
+for the encoding and the offset, and ``docs/cli.md`` for how the page plays it with the motion.
 """
 
 from __future__ import annotations
@@ -26,11 +30,12 @@ import html
 import importlib.resources
 import json
 import pathlib
-from typing import Optional, Sequence, Union
+import io
+from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from jaxgest.runtime.errors import DataError
+from jaxgest.runtime.errors import AudioError, DataError
 from jaxgest.runtime.io import atomic_output, check_output_path
 from jaxgest.motion.skeleton import Motion
 from jaxgest.render import COLORS, _as_list, _side, _titles
@@ -40,6 +45,14 @@ CM_TO_M = 0.01
 #: the page's format version (``data.version``)
 FORMAT = 1
 HTML_SUFFIXES = (".html", ".htm")
+#: sample rate of embedded speech (ZeroEGGS reads speech at 16 kHz too: nothing the models hear is lost)
+AUDIO_RATE = 16000
+#: the policy of every page: no request of any kind (scripts and styles are inline)
+CSP = "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'"
+#: ... and of a page with speech: media from ``data:`` URIs only
+CSP_AUDIO = CSP + "; media-src data:"
+
+AudioInput = Union[str, pathlib.Path, Tuple[np.ndarray, int]]
 
 
 @functools.lru_cache(maxsize=None)
@@ -138,20 +151,120 @@ def decode_clip(record: dict) -> np.ndarray:
     return center[:, None, :] + np.asarray(record["lo"]) + q * np.asarray(record["step"])
 
 
+def _opus_available() -> bool:
+    import soundfile as sf
+
+    return "OPUS" in sf.available_subtypes("OGG")
+
+
+def encode_audio(audio: AudioInput, duration: float, offset: float = 0.0) -> dict:
+    """The page's record of the speech heard with the motion: ``duration`` seconds of ``audio`` from
+    ``offset`` seconds into it, as a ``data:`` URI.
+
+    The window: the page's time t (the motion's, from 0 to ``duration``, the longest clip) plays the speech at
+    ``t + offset``; a positive ``offset`` skips the speech's first seconds, a negative one starts it later
+    (silence before it), and speech shorter than the window is followed by silence. The embedded audio thus
+    lasts exactly ``duration`` and its clock is the page's clock: the drawn frame is
+    ``round(audio.currentTime * fps)`` (= the source's time minus ``offset``, times fps).
+
+    The encoding: mono, resampled to 16 kHz (:data:`AUDIO_RATE`), Ogg Opus written by libsndfile through
+    soundfile (already a dependency; its wheels carry a libsndfile with Opus): about 3.5 kB per second of
+    speech (28 kbit/s; 4.7 kB as base64), a tenth of 16-bit PCM WAV, and Chromium and Firefox play it (the
+    browser test checks Chromium's duration within a frame). Where the installed libsndfile has no Opus
+    encoder, 16-bit PCM WAV at 16 kHz (32 kB/s, played everywhere) instead. ``codec`` in the record says which.
+
+    Args:
+      audio: a sound file (WAV, FLAC, ...; any rate and channel count) or ``(samples, sample_rate)``.
+      duration: seconds of the window (> 0).
+      offset: seconds into the speech at the motion's first frame.
+    Raises:
+      AudioError: the file is missing, unreadable, empty or not finite.
+      DataError: the window misses the speech entirely.
+    """
+    import soundfile as sf
+
+    from jaxgest.audio import load_audio
+
+    if isinstance(audio, (str, pathlib.Path)):
+        y, _ = load_audio(audio, sr=AUDIO_RATE)
+        source, label = pathlib.Path(audio).name, str(audio)
+    else:
+        samples, sr = audio
+        y = np.asarray(samples, np.float32)
+        if y.ndim == 2:
+            y = y.mean(axis=1)
+        if y.ndim != 1 or y.size == 0 or not np.all(np.isfinite(y)):
+            raise AudioError("speech for the viewer: expected finite mono or (samples, channels) audio")
+        if int(sr) != AUDIO_RATE:
+            import librosa
+
+            y = librosa.resample(y, orig_sr=int(sr), target_sr=AUDIO_RATE).astype(np.float32)
+        source, label = None, "speech"
+    offset = float(offset)
+    if not np.isfinite(offset):
+        raise DataError(f"--audio-offset must be a finite number of seconds, got {offset}")
+    n = int(round(float(duration) * AUDIO_RATE))
+    start = int(round(offset * AUDIO_RATE))
+    speech_s = y.size / AUDIO_RATE
+    if n <= 0 or start >= y.size or start + n <= 0:
+        raise DataError(f"{label}: an offset of {offset:g} s puts the speech ({speech_s:.3f} s) "
+                        f"outside the motion (0 to {float(duration):.3f} s)")
+    window = np.zeros(n, np.float32)
+    lo, hi = max(start, 0), min(start + n, y.size)
+    window[lo - start:hi - start] = y[lo:hi]
+    window = np.clip(window, -1.0, 1.0)
+    buf = io.BytesIO()
+    if _opus_available():
+        sf.write(buf, window, AUDIO_RATE, format="OGG", subtype="OPUS")
+        codec, mime = "opus", "audio/ogg"
+    else:
+        sf.write(buf, window, AUDIO_RATE, format="WAV", subtype="PCM_16")
+        codec, mime = "pcm16", "audio/wav"
+    raw = buf.getvalue()
+    return {
+        "src": f"data:{mime};base64," + base64.b64encode(raw).decode("ascii"),
+        "codec": codec,
+        "sampleRate": AUDIO_RATE,
+        "duration": n / AUDIO_RATE,
+        "offset": offset,
+        "source": source,
+        "speechSeconds": speech_s,
+        "bytes": len(raw),
+    }
+
+
+def decode_audio(record: dict) -> np.ndarray:
+    """The samples of an :func:`encode_audio` record (mono float32 at ``record["sampleRate"]``)."""
+    import soundfile as sf
+
+    _, _, b64 = record["src"].partition(";base64,")
+    y, sr = sf.read(io.BytesIO(base64.b64decode(b64)), dtype="float32")
+    if sr != record["sampleRate"]:
+        raise ValueError(f"decode_audio: {sr} Hz, the record says {record['sampleRate']}")
+    return y
+
+
 def page_data(motions, titles=None, *, overlay: bool = False, trails: bool = False,
-              trail_seconds: float = 1.0, units_to_m: float = CM_TO_M, heading: Optional[str] = None) -> dict:
-    """The JSON the page reads: clips (:func:`encode_clip`), colours and initial options."""
+              trail_seconds: float = 1.0, units_to_m: float = CM_TO_M, heading: Optional[str] = None,
+              audio: Optional[AudioInput] = None, audio_offset: float = 0.0) -> dict:
+    """The JSON the page reads: clips (:func:`encode_clip`), colours, initial options and the speech
+    (:func:`encode_audio`, ``None`` without ``audio``)."""
     motions = _as_list(motions)
     titles = _titles(titles, len(motions)) or [m.name or f"clip {k + 1}" for k, m in enumerate(motions)]
     if not trail_seconds > 0:
         raise DataError(f"viewer: the hand-trajectory window must be positive, got {trail_seconds} s")
+    clips = [encode_clip(m, t, units_to_m) for m, t in zip(motions, titles)]
+    speech = None
+    if audio is not None:
+        speech = encode_audio(audio, max(c["duration"] for c in clips), audio_offset)
     return {
         "version": FORMAT,
         "heading": heading,
         "units": "m",
         "colors": COLORS,
         "options": {"overlay": bool(overlay), "trails": bool(trails), "trailSeconds": float(trail_seconds)},
-        "clips": [encode_clip(m, t, units_to_m) for m, t in zip(motions, titles)],
+        "clips": clips,
+        "audio": speech,
     }
 
 
@@ -165,8 +278,10 @@ def html_page(motions, titles=None, **kw) -> str:
     data = page_data(motions, titles, **kw)
     heading = data["heading"] or " | ".join(c["title"] for c in data["clips"])
     page = _asset("viewer.html")
-    for key, value in (("{{TITLE}}", html.escape(heading)), ("{{CSS}}", _asset("viewer.css")),
-                       ("{{DATA}}", _json_for_script(data)), ("{{JS}}", _asset("viewer.js"))):
+    csp = CSP_AUDIO if data["audio"] else CSP
+    slots = (("{{CSP}}", csp), ("{{TITLE}}", html.escape(heading)), ("{{CSS}}", _asset("viewer.css")),
+             ("{{DATA}}", _json_for_script(data)), ("{{JS}}", _asset("viewer.js")))
+    for key, value in slots:
         if key not in page:
             raise RuntimeError(f"viewer.html: template has no {key}")
         page = page.replace(key, value, 1)
@@ -182,6 +297,8 @@ def render_html(
     trails: bool = False,
     trail_seconds: float = 1.0,
     heading: Optional[str] = None,
+    audio: Optional[AudioInput] = None,
+    audio_offset: float = 0.0,
 ) -> pathlib.Path:
     """Write a self-contained 3D viewer page of one motion or several side by side (or ``overlay``).
 
@@ -192,12 +309,16 @@ def render_html(
       overlay: start with all clips drawn in one panel (the page can switch).
       trails: start with hand trajectories shown over the last ``trail_seconds`` (the page can switch).
       heading: the page's title (default: the panel titles joined).
+      audio: speech to play with the motion, a sound file or ``(samples, sample_rate)``
+        (:func:`encode_audio`); its clock then leads the playback.
+      audio_offset: seconds into ``audio`` at the motion's first frame.
     Raises:
       DataError: the output directory does not exist, titles do not match, or positions are not finite.
+      AudioError: ``audio`` is missing, unreadable, empty or not finite.
     """
     out = check_output_path(out_path)
     text = html_page(motions, titles, overlay=overlay, trails=trails, trail_seconds=trail_seconds,
-                     heading=heading)
+                     heading=heading, audio=audio, audio_offset=audio_offset)
     with atomic_output(out) as tmp:
         pathlib.Path(tmp).write_text(text, encoding="utf-8")
     return out
@@ -277,7 +398,8 @@ def zeggs_evaluation_pages(result: dict, model, clips, out_dir, *, seed: int = 0
     """Viewer pages of the best, median and worst test clips of a ``jaxgest zeggs evaluate`` result, ranked
     by the generated motion's BeatAlign minus its shuffled control (higher is better). Each page shows the
     motion generated from the clip's audio with its style example (generated again with ``model`` and the
-    evaluation's seed) | the real clip | the style example, with the hand trajectories on."""
+    evaluation's seed) | the real clip | the style example, with the hand trajectories on, and plays the
+    clip's speech (the generated and the real motion are in step with it; the style example is not)."""
     from jaxgest.motion.datasets import load_clip_audio
 
     out_dir = pathlib.Path(out_dir)
@@ -297,5 +419,5 @@ def zeggs_evaluation_pages(result: dict, model, clips, out_dir, *, seed: int = 0
                   f"style example ({example.style})"]
         heading = f"{label} clip: {clip.path.stem} ({clip.style})"
         written.append(render_html([gen, clip.motion, example.motion], out_dir / f"{label}.html",
-                                   titles=titles, heading=heading, trails=True))
+                                   titles=titles, heading=heading, trails=True, audio=(audio, sr)))
     return written

@@ -1,6 +1,7 @@
 // jaxgest viewer: a hand-written canvas-2D renderer of skeleton clips (no library, no network).
 // Reads the JSON in #jaxgest-data (written by jaxgest/viewer.py), draws one panel per clip (or all clips
 // in one panel), plays them back synchronised by time, and shares one orbit camera between the panels.
+// With speech (data.audio) the <audio> element's clock leads the playback while it plays.
 "use strict";
 (function () {
   var root = document.documentElement;
@@ -110,7 +111,8 @@
   var gridR = Math.max(2, Math.ceil((radius * 1.6) / gridStep) * gridStep);
 
   var state = { t: 0, playing: true, speed: 1, loop: true, overlay: !!data.options.overlay,
-                trails: !!data.options.trails, trailSeconds: data.options.trailSeconds || 1 };
+                trails: !!data.options.trails, trailSeconds: data.options.trailSeconds || 1, sound: true,
+                clock: "wall", audioTime: null };
 
   // URL hash: #t=1.5&paused=1&view=front|side&overlay=1&trails=1&trail=2&speed=0.5&yaw=..&pitch=..(deg)
   var hash = {};
@@ -128,6 +130,7 @@
   if (hash.trail !== undefined) state.trailSeconds = Math.max(0.1, num(hash.trail, 1));
   if (hash.speed !== undefined) state.speed = Math.max(0.25, Math.min(2, num(hash.speed, 1)));
   if (hash.loop !== undefined) state.loop = hash.loop === "1";
+  if (hash.sound !== undefined) state.sound = hash.sound !== "0";
   if (hash.view === "front") { cam.yaw = 0; cam.pitch = 0; }
   if (hash.view === "side") { cam.yaw = Math.PI / 2; cam.pitch = 0; }
   if (hash.yaw !== undefined) cam.yaw = num(hash.yaw, 25) * Math.PI / 180;
@@ -344,6 +347,58 @@
     writeStatus();
   }
 
+  // ---------------------------------------------------------------- speech
+  // The embedded speech covers the page's time line exactly (jaxgest.viewer.encode_audio applied the
+  // offset), so while it plays the page's time IS audio.currentTime: the audio clock leads and the drawn frame
+  // follows it. Paused, scrubbed or stepped, the page moves the audio to its own time. Where the browser will
+  // not start sound before the user has touched the page (autoplay policy), the motion plays on the wall clock
+  // and the speech joins, in step, at the first click or key press.
+  var audio = null, soundBlocked = false;
+  if (data.audio) {
+    audio = document.createElement("audio");
+    audio.id = "jaxgest-audio";
+    audio.preload = "auto";
+    audio.hidden = true;
+    audio.addEventListener("error", function () {
+      errors.push("speech: the browser cannot play the embedded " + data.audio.codec + " audio (media error " +
+                  (audio.error ? audio.error.code : "?") + ")");
+      showErrors();
+    });
+    audio.src = data.audio.src;
+    document.body.appendChild(audio);
+  }
+  function audioSeek(t) {
+    if (audio && Math.abs(audio.currentTime - t) > 1e-4) audio.currentTime = t;
+  }
+  function soundHint() {
+    var h = document.getElementById("soundHint");
+    if (h) h.hidden = !(audio && soundBlocked && state.playing && state.sound);
+  }
+  // make the audio follow the page: playing or not, speed, sound on or off
+  function audioSync() {
+    if (!audio) return;
+    audio.playbackRate = state.speed;
+    audio.muted = !state.sound;
+    if (state.playing && audio.paused && state.t < lastTime) {
+      audioSeek(state.t);
+      var started = audio.play();
+      if (started && started.then) {
+        started.then(function () { soundBlocked = false; soundHint(); }, function (e) {
+          if (e && e.name === "NotAllowedError") soundBlocked = true;  // autoplay policy: wall clock until a gesture
+          else if (!e || e.name !== "AbortError") { errors.push("speech: " + String(e)); showErrors(); }
+          soundHint();
+        });
+      }
+    } else if (!state.playing && !audio.paused) {
+      audio.pause();
+      audioSeek(state.t);
+    }
+    soundHint();
+  }
+  function userGesture() { if (audio && soundBlocked) { soundBlocked = false; audioSync(); } }
+  document.addEventListener("pointerdown", userGesture, true);
+  document.addEventListener("keydown", userGesture, true);
+
   // ---------------------------------------------------------------- controls
   var el = function (id) { return document.getElementById(id); };
   var scrub = el("scrub"), clock = el("clock"), playBtn = el("play");
@@ -356,6 +411,7 @@
     clock.textContent = "frame " + Math.round(state.t * fpsRef) + " / " + nRef + " \u00b7 " +
       state.t.toFixed(3) + " / " + duration.toFixed(3) + " s";
     root.setAttribute("data-time", state.t.toFixed(6));
+    soundHint();
   }
   function writeStatus() {
     if (!statusEl || !clips || !state) return;  // an error before the page is set up: data-errors tells
@@ -365,7 +421,11 @@
     return {
       version: data.version, ready: root.getAttribute("data-ready") === "1", time: state.t,
       playing: state.playing, overlay: state.overlay, panels: panels.length, duration: duration,
-      fpsRef: fpsRef, errors: errors.slice(), resources: resources.slice(),
+      fpsRef: fpsRef, errors: errors.slice(), resources: resources.slice(), clock: state.clock,
+      audio: audio ? { codec: data.audio.codec, offset: data.audio.offset, embeddedDuration: data.audio.duration,
+                       duration: audio.duration, readyState: audio.readyState, currentTime: audio.currentTime,
+                       paused: audio.paused, muted: audio.muted, playbackRate: audio.playbackRate,
+                       blocked: soundBlocked, drawnAt: state.audioTime } : null,
       clips: clips.map(function (c) {
         return { title: c.meta.title, frames: c.meta.frames, fps: c.meta.fps, duration: c.meta.duration,
                  joints: c.J, frame: frameOf(c, state.t) };
@@ -373,16 +433,23 @@
     };
   }
   var dirty = true;
-  function setTime(t) { state.t = Math.max(0, Math.min(lastTime, t)); dirty = true; }
-  function step(n) { state.playing = false; setTime(Math.round(state.t * fpsRef + n) / fpsRef); }
+  function setTime(t) {
+    state.t = Math.max(0, Math.min(lastTime, t)); state.clock = "wall"; state.audioTime = null;
+    audioSeek(state.t); dirty = true;
+  }
+  function setPlaying(on) { state.playing = on; audioSync(); dirty = true; }
+  function step(n) { setPlaying(false); setTime(Math.round(state.t * fpsRef + n) / fpsRef); }
 
   playBtn.addEventListener("click", function () {
-    if (!state.playing && state.t >= lastTime) state.t = 0;
-    state.playing = !state.playing; dirty = true;
+    if (!state.playing && state.t >= lastTime) setTime(0);
+    setPlaying(!state.playing);
   });
-  scrub.addEventListener("input", function () { state.playing = false; setTime(parseFloat(scrub.value)); });
+  scrub.addEventListener("input", function () { setPlaying(false); setTime(parseFloat(scrub.value)); });
   el("speed").value = String(state.speed);
-  el("speed").addEventListener("change", function () { state.speed = parseFloat(el("speed").value); });
+  el("speed").addEventListener("change", function () { state.speed = parseFloat(el("speed").value); audioSync(); });
+  if (audio) el("soundLabel").hidden = false;
+  el("sound").checked = state.sound;
+  el("sound").addEventListener("change", function () { state.sound = el("sound").checked; audioSync(); });
   el("loop").checked = state.loop;
   el("loop").addEventListener("change", function () { state.loop = el("loop").checked; });
   el("overlay").checked = state.overlay;
@@ -412,6 +479,7 @@
     else if (e.key === "r") { el("camReset").click(); }
     else if (e.key === "f") { el("camFront").click(); }
     else if (e.key === "s") { el("camSide").click(); }
+    else if (e.key === "m" && audio) { el("sound").click(); }
   });
 
   function attachMouse(canvas) {
@@ -450,13 +518,19 @@
   var prev = null;
   function tick(now) {
     if (state.playing) {
-      if (prev !== null) {
-        var t = state.t + Math.min(0.25, (now - prev) / 1000) * state.speed;
-        if (t > lastTime) {
-          if (state.loop) t = 0; else { t = lastTime; state.playing = false; }
-        }
+      // the audio clock leads while the speech plays; otherwise the wall clock (times the speed)
+      var audioLeads = audio && !audio.paused && !audio.ended && audio.readyState >= 2;
+      var t = audioLeads ? audio.currentTime
+        : state.t + (prev === null ? 0 : Math.min(0.25, (now - prev) / 1000) * state.speed);
+      state.clock = audioLeads ? "audio" : "wall";
+      state.audioTime = audioLeads ? t : null;
+      if (t >= lastTime && (audioLeads || t > lastTime)) {
+        state.clock = "wall"; state.audioTime = null;
+        if (state.loop) { t = 0; audioSeek(0); } else { t = lastTime; state.playing = false; }
         state.t = t;
+        audioSync();  // paused at the end, or playing again from the start
       }
+      state.t = t;
       dirty = true;
     }
     prev = now;
@@ -466,13 +540,16 @@
 
   window.jaxgestViewer = {
     info: info,
-    setTime: function (t) { state.playing = false; setTime(t); draw(); dirty = false; return info(); },
-    play: function () { state.playing = true; dirty = true; },
-    pause: function () { state.playing = false; dirty = true; },
+    setTime: function (t) { setPlaying(false); setTime(t); draw(); dirty = false; return info(); },
+    play: function () { setPlaying(true); },
+    pause: function () { setPlaying(false); },
+    audio: audio,
     position: function (k, f, j) { return P(clips[k], f, j); },
     camera: cam
   };
   buildPanels();
+  audioSeek(state.t);
+  audioSync();
   draw();
   dirty = false;
   requestAnimationFrame(tick);

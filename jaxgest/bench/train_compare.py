@@ -16,8 +16,8 @@ losses, with its standard error over those log points) and the commit; the ratio
 overlays the two loss curves (each logged loss, light; a running mean over ``--smooth`` log points, bold).
 The results file is stamped (:mod:`jaxgest.runtime.provenance`).
 
-A training run's loss is logged every 50 steps from one batch: the final-loss comparison reads the mean
-of the tail, and "within the seed-to-seed spread" needs runs of other seeds (``--seeds-of``: further
+A training run's loss is logged every 50 steps (since issue 60 the mean over those steps; one batch's before):
+the final-loss comparison reads the mean of the tail, and "within the seed-to-seed spread" needs runs of other seeds (``--seeds-of``: further
 workdirs of the same command with other seeds, whose final losses give the spread).
 References: issue 41 (training runs before / after, same machine, same seed).
 """

@@ -30,6 +30,12 @@ def register(subparsers) -> None:
     r.add_argument("--overlay", action="store_true", help="HTML: start with the clips overlaid in one panel")
     r.add_argument("--trails", type=float, default=None, metavar="SECONDS",
                    help="HTML: start with hand trajectories over the last SECONDS shown")
+    r.add_argument("--audio", default=None, metavar="A.wav",
+                   help="HTML: speech to play with the motion (any sound file soundfile reads; embedded as 16 kHz "
+                   "mono Ogg Opus, its clock leads the playback)")
+    r.add_argument("--audio-offset", type=float, default=0.0, metavar="S",
+                   help="HTML: seconds into the audio at the motion's first frame (negative: the speech starts "
+                   "S seconds later; default 0)")
     r.set_defaults(func=_render)
 
 
@@ -55,6 +61,12 @@ def _render(args) -> int:
                         "use .html (3D viewer), .gif (animation) or .png (still)")
     if args.png and kind != "png":
         raise DataError(f"{args.out}: --png writes a PNG still; name the output .png")
+    if args.audio is not None and kind != "html":
+        raise DataError(f"{args.out}: --audio plays speech in the HTML viewer; name the output .html")
+    if args.audio is None and args.audio_offset:
+        raise DataError("--audio-offset without --audio: name the speech file with --audio A.wav")
+    if args.audio is not None and not pathlib.Path(args.audio).is_file():
+        raise DataError(f"{args.audio}: no such audio file")
     motions = []
     for path in args.inputs:
         if not pathlib.Path(path).is_file():
@@ -68,7 +80,8 @@ def _render(args) -> int:
 
         out = render_html(motions, args.out, titles=titles, overlay=args.overlay,
                           trails=args.trails is not None,
-                          trail_seconds=1.0 if args.trails is None else args.trails)
+                          trail_seconds=1.0 if args.trails is None else args.trails,
+                          audio=args.audio, audio_offset=args.audio_offset)
     elif kind == "png":
         out = render_png(motions, args.out, frame=args.frame, titles=titles)
     else:

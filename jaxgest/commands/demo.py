@@ -10,8 +10,8 @@ The demo runs everything on the built-in synthetic data, with no download and no
    against a shuffled-onset control, and the style-probe accuracy of the ZEGGS style embeddings;
 5. runs the chained pipeline (speech -> ZEGGS in the neutral style -> TGST to an expressive style);
 6. writes BVH files, side-by-side GIFs with titles and a self-contained 3D HTML viewer page beside each GIF
-   (:mod:`jaxgest.viewer`; whole clips, not only the GIF's first seconds), ``metrics.json`` and prints a
-   summary table naming the pages.
+   (:mod:`jaxgest.viewer`; whole clips, not only the GIF's first seconds; the speech pages play their speech),
+   ``metrics.json`` and prints a summary table naming the pages.
 
 ``--quick`` (CI smoke test, about 2 minutes on 2 cores) uses 2 contents x 7 styles of 6 s and few training
 steps; the default (about 10 minutes) uses all 6 contents x 7 styles of 10 s and longer training. The tiny
@@ -204,7 +204,8 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     render_gif(generated, results / "speech_styles.gif", titles=[STYLES[0], STYLES[1], "blend 50/50"],
                max_seconds=plan["gif_seconds"])
     render_html(generated, results / "speech_styles.html", titles=[STYLES[0], STYLES[1], "blend 50/50"],
-                heading=f"ZeroEGGS: '{OTHER_CONTENT}' speech in {', '.join(STYLES)} and a 50/50 blend", trails=True)
+                heading=f"ZeroEGGS: '{OTHER_CONTENT}' speech in {', '.join(STYLES)} and a 50/50 blend",
+                trails=True, audio=(audio, sr))
     pages.append("speech_styles.html")
     clips = load_folder(data)
     try:  # the probe beside its controls (random-init encoder, raw window statistics) on the same folds
@@ -234,7 +235,7 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     render_gif([zeggs_out, styled, exemplar], results / "pipeline.gif", titles=pipeline_titles,
                max_seconds=plan["gif_seconds"])
     render_html([zeggs_out, styled, exemplar], results / "pipeline.html", titles=pipeline_titles,
-                heading=f"pipeline: speech -> ZeroEGGS ({NEUTRAL}) -> TGST ({STYLES[0]})")
+                heading=f"pipeline: speech -> ZeroEGGS ({NEUTRAL}) -> TGST ({STYLES[0]})", audio=(audio, sr))
     pages.append("pipeline.html")
     pipe = {"frames": styled.num_frames, "fps": styled.fps, **ptimes}
     try:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxgest.commands.common import add_train_arguments, overrides, training_data
+from jaxgest.commands.common import add_train_arguments, overrides, training_data, watch_arguments
 from jaxgest.runtime.errors import DataError
 from jaxgest.tgst.config import PRESETS, InferenceConfig
 from jaxgest.tgst.model import METHODS
@@ -50,7 +50,7 @@ def _train(args) -> int:
     apply_overrides(resolve_preset(args.preset), changes)  # a bad override writes nothing
     summary = train(training_data(args), args.workdir, preset=args.preset, ae_steps=ae, transformer_steps=tr,
                     seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-                    ablate=ablate, overrides=changes)
+                    ablate=ablate, overrides=changes, **watch_arguments(args))
     print(format_summary(summary))
     return 0
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import pathlib
 
-from jaxgest.commands.common import add_train_arguments, overrides, training_data
+from jaxgest.commands.common import add_train_arguments, overrides, training_data, watch_arguments
 from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.zeggs.config import PRESETS
 from jaxgest.zeggs.claims import SPEECH_STYLES, SUBSTITUTES
@@ -80,7 +80,8 @@ def register(subparsers) -> None:
                    help="probes and leakage only (skip beat alignment and the Fréchet distance)")
     e.add_argument("--html", default=None, metavar="DIR",
                    help="also write 3D viewer pages of the best, median and worst generated test clips "
-                   "(DIR/best.html, ...; ranked by BeatAlign minus its shuffled control)")
+                   "(DIR/best.html, ...; ranked by BeatAlign minus its shuffled control), each playing the "
+                   "clip's speech")
     e.add_argument("--claims", action="store_true",
                    help="the paper's claims on the generated motion instead of the diagnostics: style portrayal, "
                    "realism and appropriateness against GT and MM on --heldout data (zero-shot for the model's "
@@ -116,7 +117,7 @@ def _train(args) -> int:
     data = training_data(args)  # steps and intervals checked before any data is written
     r = train(data, args.workdir, preset=args.preset, steps=args.steps,
               seed=args.seed, devices=args.devices, ckpt_every=args.ckpt_every, log_every=args.log_every,
-              overrides=changes)
+              overrides=changes, **watch_arguments(args))
     final = r["final"]
     if r["start_step"] >= r["steps"]:
         if r["start_step"] == 0:
@@ -126,7 +127,8 @@ def _train(args) -> int:
                   "nothing to do (raise --steps to continue)")
         return 0
     print(f"zeggs: trained {r['steps']} steps (resumed from {r['start_step']}) on {r['devices']} device(s) in "
-          f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}; workdir {args.workdir}")
+          f"{r['wall_s']:.1f} s; final loss {final.get('loss', float('nan')):.4g}"
+          + (f" (held-out {final['eval_loss']:.4g})" if "eval_loss" in final else "") + f"; workdir {args.workdir}")
     return 0
 
 

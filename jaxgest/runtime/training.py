@@ -7,7 +7,14 @@ Every model (TGST autoencoder, TGST transformer, ZEGGS) trains through :func:`tr
   point and resumed from its last checkpoint ends with exactly the parameters of an uninterrupted run;
 * checkpoints are :class:`jaxgest.runtime.checkpoint.Checkpointer` (orbax, with a stored and checked model config;
   re-exported here with the workdir format checks);
-* ``workdir/metrics.jsonl`` gets one JSON line per log step and ``workdir/config.json`` the config;
+* ``workdir/metrics.jsonl`` gets one JSON line per log step and ``workdir/config.json`` the config; a line's
+  training metrics are their means over the steps since the previous line (of this run: the first line after a
+  resume averages the steps since the resume), accumulated on the device; ``MetricsLogger(tb_dir=...)`` writes
+  the same scalars for TensorBoard (:class:`TensorBoardWriter`, tensorboardX: the ``[tb]`` extra);
+* ``eval_fn`` / ``eval_every``: a held-out loss at every log step that is a multiple of ``eval_every`` (and
+  the last), logged on that line with the prefix ``eval_``; ``profile_dir``: :data:`PROFILE_STEPS` steps
+  after the first (compiling) one of the run traced with :func:`jax.profiler.trace` (TensorBoard's profile
+  plugin or Perfetto read the trace);
 * SIGINT / SIGTERM (Ctrl-C, a batch scheduler's or a preemptible machine's notice) finish the current step,
   save a checkpoint of that step and stop with :class:`~jaxgest.runtime.errors.Interrupted` (the command line prints its
   one line, e.g. ``runs/a: tgst transformer interrupted by SIGTERM at step 137; checkpoint saved at step 137
@@ -36,13 +43,14 @@ import time
 from typing import Any, Callable, Mapping, Optional
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from flax.training.train_state import TrainState  # noqa: F401  (re-exported: the state every step uses)
 
 from jaxgest.runtime.checkpoint import Checkpointer, all_finite, strict_checkpoints, warn  # noqa: F401  (re-exported)
 from jaxgest.runtime.workdir_format import (FORMAT_VERSION, MODELS, check_workdir_config,  # noqa: F401  (re-exported)
                                     config_diff)
-from jaxgest.runtime.errors import Interrupted, TrainingError, WriteError
+from jaxgest.runtime.errors import DataError, Interrupted, JaxgestError, TrainingError, WriteError
 from jaxgest.runtime.io import write_error, write_json_atomic  # noqa: F401  (write_json_atomic re-exported)
 
 __all__ = [
@@ -52,6 +60,8 @@ __all__ = [
     "jit_config_step",
     "Checkpointer",
     "MetricsLogger",
+    "TensorBoardWriter",
+    "heldout_eval",
     "train_loop",
     "stop_on_signals",
     "StopRequest",
@@ -116,13 +126,86 @@ def jit_config_step(step: Callable, mesh, cfg, *, extra_args: int = 0,
     return lambda state, batch, key, *extra: jitted(state, batch, key, *extra, cfg)
 
 
-class MetricsLogger:
-    """Appends one JSON object per log step to ``workdir/metrics.jsonl``."""
+#: steps traced by ``train_loop(profile_dir=...)`` (``--profile DIR``), after the run's first (compiling) step
+PROFILE_STEPS = 3
+#: prefix of held-out metrics in metrics.jsonl (``eval_loss``, ...)
+EVAL_PREFIX = "eval_"
+#: held-out batches of one evaluation: the same ones every time, so that the curve compares like with like
+EVAL_BATCHES = 4
+#: seed of the held-out batches and noise (not the run's: runs of other seeds see the same batches)
+EVAL_SEED = 0x5EED
 
-    def __init__(self, workdir, filename: str = "metrics.jsonl", extra: Optional[Mapping] = None):
+
+def heldout_eval(metrics_fn: Callable, batches, *args) -> Callable[[Any], dict]:
+    """``eval_fn(state)`` for :func:`train_loop`: the mean over ``batches`` (fixed, built once) of
+    ``metrics_fn(state.params, batch, state.step, *args) -> {name: scalar}`` (jit-compiled by the caller)."""
+    batches = list(batches)
+    if not batches:
+        raise ValueError("heldout_eval: no batches")
+
+    def eval_fn(state) -> dict:
+        total = None
+        for b in batches:
+            m = metrics_fn(state.params, b, state.step, *args)
+            total = m if total is None else _tree_add(total, m)
+        return {k: v / len(batches) for k, v in total.items()}
+
+    return eval_fn
+
+
+class TensorBoardWriter:
+    """The scalars of every :meth:`log` call as TensorBoard events (tensorboardX, the ``[tb]`` extra):
+    training metrics in ``tb_dir/train``, held-out ones (``eval_...``, the prefix dropped) in
+    ``tb_dir/eval``, so that TensorBoard draws the two runs of one tag (``<stage>/loss``) in one chart.
+    Flushed at every call."""
+
+    def __init__(self, tb_dir, stage: Optional[str] = None):
+        try:
+            from tensorboardX import SummaryWriter
+        except ImportError:
+            raise JaxgestError("--tb needs tensorboardX: pip install 'jaxgest[tb]' "
+                               "(or pip install tensorboardX)") from None
+        self.dir = pathlib.Path(tb_dir)
+        if self.dir.exists() and not self.dir.is_dir():
+            raise WriteError(f"{self.dir}: --tb needs a folder, and this is a file")
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise write_error(self.dir, e, existed=False) from None
+        self.stage = stage
+        self._writers = {run: SummaryWriter(str(self.dir / run)) for run in ("train", "eval")}
+
+    def log(self, step: int, metrics: Mapping[str, Any]) -> None:
+        used = set()
+        for k, v in metrics.items():
+            if not isinstance(v, (int, float)) or isinstance(v, bool):
+                continue
+            run, name = ("eval", k[len(EVAL_PREFIX):]) if k.startswith(EVAL_PREFIX) else ("train", k)
+            tag = f"{self.stage}/{name}" if self.stage else name
+            self._writers[run].add_scalar(tag, float(v), int(step))
+            used.add(run)
+        for run in used:
+            self._writers[run].flush()
+
+    def close(self) -> None:
+        for w in self._writers.values():
+            w.close()
+
+
+class MetricsLogger:
+    """Appends one JSON object per log step to ``workdir/metrics.jsonl`` and, with ``tb_dir``, writes the
+    metrics for TensorBoard too (:class:`TensorBoardWriter`, tagged with ``extra["stage"]``)."""
+
+    def __init__(self, workdir, filename: str = "metrics.jsonl", extra: Optional[Mapping] = None,
+                 tb_dir=None):
         self.path = pathlib.Path(workdir) / filename
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.extra = dict(extra or {})
+        self.tb = TensorBoardWriter(tb_dir, stage=self.extra.get("stage")) if tb_dir is not None else None
+
+    def close(self) -> None:
+        if self.tb is not None:
+            self.tb.close()
 
     def log(self, step: int, metrics: Mapping[str, Any]) -> dict:
         record = {"step": int(step), **self.extra}
@@ -138,6 +221,8 @@ class MetricsLogger:
             with contextlib.suppress(OSError):
                 os.truncate(self.path, size)
             raise write_error(self.path, e, existed=size > 0) from None
+        if self.tb is not None:
+            self.tb.log(step, {k: record[k] for k in metrics})
         return record
 
 
@@ -170,6 +255,22 @@ def check_intervals(**intervals) -> None:
     for name, value in intervals.items():
         if value is not None and not (isinstance(value, (int, np.integer)) and value >= 1):
             raise TrainingError(f"{name} must be a positive number of steps, got {value!r}")
+
+
+def check_eval(eval_data, eval_every, log_every) -> None:
+    """Raise :class:`TrainingError` unless ``eval_data`` and ``eval_every`` come together, ``eval_every`` is a
+    multiple of ``log_every`` (a held-out loss is logged on a log line) and ``eval_data`` is a folder."""
+    if (eval_data is None) != (eval_every is None):
+        raise TrainingError("--eval-every and --eval-data go together: the held-out loss needs held-out "
+                            "clips (--eval-data DIR) and an interval (--eval-every N)")
+    if eval_every is None:
+        return
+    check_intervals(eval_every=eval_every)
+    if log_every is not None and eval_every % log_every:
+        raise TrainingError(f"--eval-every {eval_every} must be a multiple of --log-every {log_every} "
+                            "(the held-out loss is logged on a log line)")
+    if not pathlib.Path(eval_data).is_dir():
+        raise DataError(f"{eval_data}: --eval-data needs a folder of held-out clips, and there is none")
 
 
 def check_steps(**counts) -> None:
@@ -289,36 +390,58 @@ def train_loop(
     desc: str = "train",
     progress: bool = True,
     on_log: Optional[Callable[[int, dict], None]] = None,
+    eval_fn: Optional[Callable[[Any], Mapping[str, Any]]] = None,
+    eval_every: Optional[int] = None,
+    profile_dir=None,
 ):
     """Run ``step_fn`` from ``state.step`` up to ``num_steps`` (resumes from a restored state).
 
     ``step_fn(state, batch, key) -> (state, metrics)`` is expected to be jit-compiled with the state
     donated and to ``fold_in(key, state.step)`` inside; ``batch_fn(i)`` returns the batch of step ``i``.
-    Metrics are fetched from the device only at log steps (no per-step host sync).
+    Metrics are summed on the device and fetched only at log steps (no per-step host sync); a log line holds
+    their means over the steps since the previous one. ``eval_fn(state) -> metrics`` (a held-out loss) runs at
+    the log steps that are multiples of ``eval_every`` and at the last step; its metrics join that line as
+    ``eval_<name>``. ``profile_dir``: trace :data:`PROFILE_STEPS` steps after the first with
+    :func:`jax.profiler.trace` into that folder.
     """
     from tqdm.auto import tqdm
 
-    check_intervals(log_every=log_every, ckpt_every=ckpt_every)
+    check_intervals(log_every=log_every, ckpt_every=ckpt_every, eval_every=eval_every)
+    if (eval_fn is None) != (eval_every is None):
+        raise ValueError("train_loop: eval_fn and eval_every go together")
     start = int(jax.device_get(state.step))
     if start >= num_steps:
         return state
     bar = tqdm(total=num_steps, initial=start, desc=desc, disable=not progress, dynamic_ncols=True, leave=False)
     last_log_time = time.perf_counter()
-    metrics = {}
-    with stop_on_signals(_stop_signals()) as request:
+    metrics, summed, n_summed = {}, None, 0
+    trace = _ProfileWindow(profile_dir, start, num_steps)
+    with stop_on_signals(_stop_signals()) as request, trace:
         for i in range(start, num_steps):
+            trace.before(i)
             batch = batch_fn(i)
             state, metrics = step_fn(state, batch, key)
+            summed = metrics if summed is None else _tree_add(summed, metrics)
+            n_summed += 1
             step = i + 1
+            trace.after(step, state)
             at_log = step % log_every == 0 or step == num_steps
             at_ckpt = checkpointer is not None and (step % ckpt_every == 0 or step == num_steps)
             if at_log or at_ckpt:
                 host = {k: float(np.asarray(jax.device_get(v))) for k, v in metrics.items()}
                 _check_finite(step, host, desc, checkpointer)
-                if at_log:
+                if at_log:  # the interval's means (a non-finite step anywhere in it shows here)
+                    host = {k: float(np.asarray(jax.device_get(v))) / n_summed for k, v in summed.items()}
                     now = time.perf_counter()
-                    host["steps_per_s"] = log_every / max(now - last_log_time, 1e-9) if step > start + 1 else 0.0
-                    last_log_time = now
+                    rate = n_summed / max(now - last_log_time, 1e-9) if step > start + 1 else 0.0
+                    summed, n_summed = None, 0
+                    if eval_fn is not None and (step % eval_every == 0 or step == num_steps):
+                        held_out = eval_fn(state)  # its time counts in no interval's steps/s
+                        host.update({EVAL_PREFIX + k: float(np.asarray(jax.device_get(v)))
+                                     for k, v in held_out.items()})
+                    _check_finite(step, host, desc, checkpointer)
+                    host["steps_per_s"] = rate
+                    last_log_time = time.perf_counter()
                     if logger is not None:
                         try:
                             logger.log(step, host)
@@ -339,6 +462,44 @@ def train_loop(
                 _stop(state, step, signum, desc, checkpointer, request, saved=at_ckpt)
     bar.close()
     return state
+
+
+@jax.jit
+def _tree_add(a, b):
+    return jax.tree.map(jnp.add, a, b)
+
+
+class _ProfileWindow:
+    """Traces steps ``first .. first + PROFILE_STEPS - 1`` (0-based step indices) of a run with
+    :func:`jax.profiler.start_trace` into ``folder``; ``first`` is the run's second step (the first compiles),
+    or its only one. Used as a context manager so that an exception stops the trace."""
+
+    def __init__(self, folder, start: int, num_steps: int):
+        self.folder = None if folder is None else pathlib.Path(folder)
+        self.first = start + 1 if num_steps - start > 1 else start
+        self.last = min(num_steps, self.first + PROFILE_STEPS)  # 1-based step count at which to stop
+        self.active = False
+
+    def before(self, i: int) -> None:
+        if self.folder is not None and i == self.first:
+            jax.profiler.start_trace(str(self.folder))
+            self.active = True
+
+    def after(self, step: int, state) -> None:
+        if self.active and step >= self.last:
+            jax.block_until_ready(state)  # the traced steps' device work inside the trace
+            self._stop()
+
+    def _stop(self) -> None:
+        self.active = False
+        jax.profiler.stop_trace()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.active:
+            self._stop()
 
 
 def _stop(state, step: int, signum: int, desc: str, checkpointer, request: StopRequest, saved: bool):

@@ -58,22 +58,29 @@ def make_ae_train_step(cfg: Config, tx: optax.GradientTransformation) -> Step:
 
     def loss_fn(params, batch, key, step):
         del key, step  # deterministic model (no dropout), constant loss weights
-        t = cfg.train.autoencoder  # optional recipe terms (not in the paper)
-        terms = ae_loss_terms(params, batch, cfg=cfg.model, position_terms=bool(t.position_velocity_weight),
-                              trunk_terms=t.trunk_weight != 1.0)
-        metrics = {k: jnp.mean(v) for k, v in terms.items()}
-        loss = metrics["loss"]
-        if t.velocity_weight:
-            loss = loss + t.velocity_weight * metrics["velocity_loss"]
-        if t.trunk_weight != 1.0:  # the trunk's share of both terms counted trunk_weight times
-            extra = metrics["trunk_loss"] + t.velocity_weight * metrics["trunk_velocity_loss"]
-            loss = loss + (t.trunk_weight - 1.0) * (len(TRUNK_JOINTS) / len(body.BODY)) * extra
-        if t.position_velocity_weight:
-            term = "position_velocity_loss" if t.position_velocity_joints == "all" else "upper_position_velocity_loss"
-            loss = loss + t.position_velocity_weight * metrics[term]
-        return loss, metrics
+        return ae_objective(params, batch, cfg)
 
     return make_update_step(loss_fn)
+
+
+def ae_objective(params: Params, batch: dict, cfg: Config) -> tuple[jax.Array, dict]:
+    """``(objective, metrics)`` of the autoencoder step (:func:`make_ae_train_step`) on ``batch``: the
+    objective it differentiates and the batch means it logs (``loss`` is the reconstruction term); the
+    held-out loss (``--eval-every``) is the same metrics on held-out windows."""
+    t = cfg.train.autoencoder  # optional recipe terms (not in the paper)
+    terms = ae_loss_terms(params, batch, cfg=cfg.model, position_terms=bool(t.position_velocity_weight),
+                          trunk_terms=t.trunk_weight != 1.0)
+    metrics = {k: jnp.mean(v) for k, v in terms.items()}
+    loss = metrics["loss"]
+    if t.velocity_weight:
+        loss = loss + t.velocity_weight * metrics["velocity_loss"]
+    if t.trunk_weight != 1.0:  # the trunk's share of both terms counted trunk_weight times
+        extra = metrics["trunk_loss"] + t.velocity_weight * metrics["trunk_velocity_loss"]
+        loss = loss + (t.trunk_weight - 1.0) * (len(TRUNK_JOINTS) / len(body.BODY)) * extra
+    if t.position_velocity_weight:
+        term = "position_velocity_loss" if t.position_velocity_joints == "all" else "upper_position_velocity_loss"
+        loss = loss + t.position_velocity_weight * metrics[term]
+    return loss, metrics
 
 
 def make_transformer_train_step(cfg: Config, tx: optax.GradientTransformation, ae_params: Params) -> Step:
@@ -88,20 +95,27 @@ def make_transformer_train_step(cfg: Config, tx: optax.GradientTransformation, a
     ``structure``, ``appearance`` (batch means; switched-off terms are 0).
     """
     ae_params = jax.tree_util.tree_map(jnp.asarray, ae_params)
-    model, weights = cfg.model, cfg.train.transformer
-    w, h = model.token_width, model.token_stride
 
     del tx  # the state's own optimiser applies the update
 
     def loss_fn(params, batch, key, step):
         del key, step  # deterministic model (no dropout), constant loss weights
-        zc, zs, _, _ = encode_pair(ae_params, batch["content"], batch["style"], cfg=model)
-        content, style = (jax.lax.stop_gradient(tokenize(z, w, h)) for z in (zc, zs))
-        style_valid = batch.get("style_valid")  # whole style clips padded to a common length
-        if style_valid is not None:
-            chex.assert_shape(style_valid, style.shape[:2])
-        terms = transformer_loss_terms(params, content, style, cfg=model, train=weights, style_valid=style_valid)
-        metrics = {k: jnp.mean(v) for k, v in terms.items()}
-        return metrics["loss"], metrics
+        return transformer_objective(params, batch, ae_params, cfg)
 
     return make_update_step(loss_fn)
+
+
+def transformer_objective(params: Params, batch: dict, ae_params: Params,
+                          cfg: Config) -> tuple[jax.Array, dict]:
+    """``(loss, metrics)`` of the transformer step (:func:`make_transformer_train_step`) on ``batch`` with the
+    frozen autoencoder ``ae_params``; the held-out loss (``--eval-every``) is the same on held-out pairs."""
+    model, weights = cfg.model, cfg.train.transformer
+    w, h = model.token_width, model.token_stride
+    zc, zs, _, _ = encode_pair(ae_params, batch["content"], batch["style"], cfg=model)
+    content, style = (jax.lax.stop_gradient(tokenize(z, w, h)) for z in (zc, zs))
+    style_valid = batch.get("style_valid")  # whole style clips padded to a common length
+    if style_valid is not None:
+        chex.assert_shape(style_valid, style.shape[:2])
+    terms = transformer_loss_terms(params, content, style, cfg=model, train=weights, style_valid=style_valid)
+    metrics = {k: jnp.mean(v) for k, v in terms.items()}
+    return metrics["loss"], metrics

@@ -19,12 +19,14 @@ Step counts live in the preset (``train.autoencoder.steps``, ``train.transformer
 
 from __future__ import annotations
 
+import functools
 import pathlib
 import time
 from typing import Optional
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 
 from jaxgest.runtime import parallel, training
@@ -36,8 +38,8 @@ from jaxgest.tgst import autoencoder
 from jaxgest.tgst import data as tdata
 from jaxgest.tgst.config import Config, preset as get_preset
 from jaxgest.tgst.model import init_params
-from jaxgest.tgst.steps import (create_ae_state, create_transformer_state, make_ae_train_step,
-                                make_transformer_train_step)
+from jaxgest.tgst.steps import (ae_objective, create_ae_state, create_transformer_state, make_ae_train_step,
+                                make_transformer_train_step, transformer_objective)
 from jaxgest.tgst.workdir import (AE_KIND, AE_SUBDIR, MODEL, TRANSFORMER_KIND,  # noqa: F401  (re-exported)
                                   TRANSFORMER_SUBDIR, ae_checkpointer, check_existing,
                                   set_aside_stale_transformer, stored_transformer_meta,
@@ -112,6 +114,40 @@ def _transformer_step(state, batch, key, ae_params, cfg: Config):
     return bare_state(state), metrics
 
 
+@functools.partial(jax.jit, static_argnames="cfg")
+def _ae_heldout(params, batch, step, cfg: Config) -> dict:
+    """The autoencoder step's metrics on a held-out batch (``--eval-every``)."""
+    return ae_objective(params, batch, cfg)[1]
+
+
+@functools.partial(jax.jit, static_argnames="cfg")
+def _transformer_heldout(params, batch, step, ae_params, cfg: Config) -> dict:
+    """The transformer step's metrics on a held-out batch (``--eval-every``)."""
+    return transformer_objective(params, batch, ae_params, cfg)[1]
+
+
+def _heldout_data(eval_data, cfg0: Config, cfg: Config, progress: bool):
+    """The held-out clips of ``eval_data``: at least one (autoencoder) and two (transformer pairs) must hold
+    the training windows of ``cfg``."""
+    heldout = tdata.load_body_data(eval_data, cfg0, progress=progress)
+    lengths = np.asarray(heldout.lengths)
+    for what, need in (("autoencoder", 1), ("transformer", 2)):
+        window = getattr(cfg.train, what).window
+        if int((lengths >= window).sum()) < need:
+            raise DataError(f"{eval_data}: the {what}'s held-out loss needs {need} clip(s) of at least "
+                            f"{window} frames (its training window) at the model rate; the longest has "
+                            f"{int(lengths.max())}")
+    return heldout
+
+
+def _profile_subdir(profile_dir, stage: str):
+    return None if profile_dir is None else pathlib.Path(profile_dir) / stage
+
+
+def _fixed_batches(batch_fn, mesh) -> list:
+    return [parallel.sharded_batch_fn(batch_fn, mesh)(k) for k in range(training.EVAL_BATCHES)]
+
+
 def _int32_step(state):
     """A non-weak int32 step so a restored state has the same avals (no recompilation)."""
     return state.replace(step=jnp.zeros((), jnp.int32))
@@ -126,9 +162,16 @@ def _check_batch(batch_size: int, mesh, what: str) -> None:
 def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = None,
           transformer_steps: Optional[int] = None, seed: int = 0, devices: Optional[int] = None,
           progress: bool = True, log_every: int = 50, ckpt_every: int = 500, ablate=(),
-          overrides: Optional[dict] = None) -> dict:
+          overrides: Optional[dict] = None, eval_data=None, eval_every: Optional[int] = None, tb_dir=None,
+          profile_dir=None) -> dict:
     """Train (or resume) both TGST stages on the dataset folder ``data_dir`` into ``workdir``; returns a
     summary dict.
+
+    ``eval_data`` / ``eval_every``: each stage's loss on held-out clips
+    (:data:`~jaxgest.runtime.training.EVAL_BATCHES` fixed batches of the training windows) every
+    ``eval_every`` steps, logged as ``eval_loss``, ... (:func:`jaxgest.runtime.training.train_loop`);
+    ``tb_dir``: TensorBoard events too; ``profile_dir``: a :func:`jax.profiler.trace` of a few steps of each
+    stage (``profile_dir/autoencoder``, ``profile_dir/transformer``).
 
     Summary: ``{"workdir", "preset", "ae": {"steps", "start_step", "loss", "angle_deg", "wall_s",
     "steps_per_s"}, "transformer": {...same, with the loss terms}, "wall_s", "devices", "windows"}``.
@@ -139,7 +182,8 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     ae_steps = cfg0.train.autoencoder.steps if ae_steps is None else int(ae_steps)
     transformer_steps = cfg0.train.transformer.steps if transformer_steps is None else int(transformer_steps)
     training.check_steps(ae_steps=ae_steps, transformer_steps=transformer_steps)
-    training.check_intervals(log_every=log_every, ckpt_every=ckpt_every)
+    training.check_intervals(log_every=log_every, ckpt_every=ckpt_every, eval_every=eval_every)
+    training.check_eval(eval_data, eval_every, log_every)
     if data_dir is None:
         raise DataError("tgst train: no data folder given (the command line writes the built-in synthetic "
                         "data when --data is left out)")
@@ -153,6 +197,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
     cfg = tdata.fit_windows(cfg0, body_data)
     _check_batch(cfg.train.autoencoder.batch_size, mesh, "autoencoder")
     _check_batch(cfg.train.transformer.batch_size, mesh, "transformer")
+    heldout = _heldout_data(eval_data, cfg0, cfg, progress) if eval_data is not None else None
     with exclusive_workdir(workdir, primary=jax.process_index() == 0):  # one writer per workdir
         workdir.mkdir(parents=True, exist_ok=True)
 
@@ -187,12 +232,18 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
         ae_state = parallel.replicate(
             bare_state(_int32_step(create_ae_state(cfg, params0["autoencoder"], ae_optimizer(cfg)))), mesh)
         ae_state = ae_ckpt.restore(ae_state)
-        ae_logger = training.MetricsLogger(workdir, extra={"stage": "autoencoder", **info})
+        tb = tb_dir if jax.process_index() == 0 else None
+        ae_logger = training.MetricsLogger(workdir, extra={"stage": "autoencoder", **info}, tb_dir=tb)
         last = {}
+        ae_eval = None
+        if heldout is not None:
+            fixed = _fixed_batches(lambda k: tdata.ae_batch(heldout, cfg, training.EVAL_SEED, k), mesh)
+            ae_eval = training.heldout_eval(_ae_heldout, fixed, cfg)
         ae_state, summary["ae"] = _run_stage(
             ae_state, ae_step_fn, lambda i: tdata.ae_batch(body_data, cfg, seed, i), mesh,
             key=key, num_steps=ae_steps, checkpointer=ae_ckpt, logger=ae_logger, desc="tgst autoencoder",
-            progress=progress, log_every=log_every, ckpt_every=ckpt_every, last=last)
+            progress=progress, log_every=log_every, ckpt_every=ckpt_every, last=last, eval_fn=ae_eval,
+            eval_every=eval_every, profile_dir=_profile_subdir(profile_dir, "autoencoder"))
         ae_done = int(jax.device_get(ae_state.step))
         ae_params = parallel.replicate(jax.device_get(ae_state.params), mesh)
         ae_ckpt.close()
@@ -204,27 +255,37 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
         tr_state = create_transformer_state(cfg, params0["transformer"], transformer_optimizer(cfg))
         tr_state = parallel.replicate(bare_state(_int32_step(tr_state)), mesh)
         tr_state = tr_ckpt.restore(tr_state)
-        tr_logger = training.MetricsLogger(workdir, extra={"stage": "transformer", **info})
+        tr_logger = training.MetricsLogger(workdir, extra={"stage": "transformer", **info}, tb_dir=tb)
+        tr_eval = None
+        if heldout is not None:
+            fixed = _fixed_batches(
+                lambda k: tdata.transformer_batch(heldout, cfg, training.EVAL_SEED, k), mesh)
+            tr_eval = training.heldout_eval(_transformer_heldout, fixed, ae_params, cfg)
         tr_state, summary["transformer"] = _run_stage(
             tr_state, lambda st, b, k: tr_step_fn(st, b, k, ae_params),
             lambda i: tdata.transformer_batch(body_data, cfg, seed, i), mesh, key=key,
             num_steps=transformer_steps, checkpointer=tr_ckpt, logger=tr_logger, desc="tgst transformer",
-            progress=progress, log_every=log_every, ckpt_every=ckpt_every, last={})
+            progress=progress, log_every=log_every, ckpt_every=ckpt_every, last={}, eval_fn=tr_eval,
+            eval_every=eval_every, profile_dir=_profile_subdir(profile_dir, "transformer"))
         tr_ckpt.close()
         summary["wall_s"] = time.perf_counter() - t0
         return summary
 
 
 def _run_stage(state, step_fn, batch_fn, mesh, *, key, num_steps, checkpointer, logger, desc, progress,
-               log_every, ckpt_every, last):
+               log_every, ckpt_every, last, eval_fn=None, eval_every=None, profile_dir=None):
     start = int(jax.device_get(state.step))
     t = time.perf_counter()
-    if start < num_steps:
-        state = training.train_loop(
-            state, step_fn, parallel.sharded_batch_fn(batch_fn, mesh),
-            key=key, num_steps=num_steps, checkpointer=checkpointer, logger=logger,
-            log_every=min(log_every, num_steps), ckpt_every=ckpt_every, desc=desc, progress=progress,
-            on_log=lambda s, m: last.update(m))
+    try:
+        if start < num_steps:
+            state = training.train_loop(
+                state, step_fn, parallel.sharded_batch_fn(batch_fn, mesh),
+                key=key, num_steps=num_steps, checkpointer=checkpointer, logger=logger,
+                log_every=min(log_every, num_steps), ckpt_every=ckpt_every, desc=desc, progress=progress,
+                on_log=lambda s, m: last.update(m), eval_fn=eval_fn,
+                eval_every=eval_every if eval_fn is not None else None, profile_dir=profile_dir)
+    finally:
+        logger.close()
     wall = time.perf_counter() - t
     done = int(jax.device_get(state.step))
     ran = max(done - start, 0)
@@ -240,6 +301,7 @@ def format_summary(s: dict) -> str:
             done = "no steps requested" if d["steps"] == 0 else f"already at step {d['steps']}, nothing to do"
             return f"{name} {done}"
         extra = f" ({d['angle_deg']:.2f} deg)" if "angle_deg" in d else ""
+        extra += f" (held-out {d['eval_loss']:.4g})" if "eval_loss" in d else ""
         return (f"{name} {d['steps']} steps loss {d.get('loss', float('nan')):.4g}{extra}, "
                 f"{d['steps_per_s']:.1f} steps/s (from step {d['start_step']})")
     stale = (f" (the transformer trained on the earlier autoencoder was moved to checkpoints/"

@@ -17,6 +17,7 @@ References: Ghorbani et al. 2023, §4.3.
 
 from __future__ import annotations
 
+import functools
 import pathlib
 import time
 from typing import Optional
@@ -29,14 +30,15 @@ from jaxgest.runtime.config import apply_overrides
 from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats, load_folder
-from jaxgest.runtime.training import (MetricsLogger, TrainState, bare_state, check_intervals, check_steps,
-                              jit_config_step, train_loop)
+from jaxgest.runtime.training import (EVAL_BATCHES, EVAL_SEED, MetricsLogger, TrainState, bare_state,
+                                      check_eval, check_intervals, check_steps, heldout_eval, jit_config_step,
+                                      train_loop)
 from jaxgest.zeggs import data as zdata
 from jaxgest.zeggs import features
 from jaxgest.zeggs import workdir as wd
 from jaxgest.zeggs.config import Config, preset as get_preset
 from jaxgest.zeggs.model import init_params
-from jaxgest.zeggs.steps import make_optimizer, make_train_step, pose_stats as stats_arrays
+from jaxgest.zeggs.steps import loss_terms, make_optimizer, make_train_step, pose_stats as stats_arrays
 from jaxgest.runtime.workdir_lock import exclusive_workdir
 
 
@@ -62,17 +64,44 @@ def _train_step(state, batch, key, stats, cfg: Config):
     return bare_state(state), metrics
 
 
+@functools.partial(jax.jit, static_argnames="cfg")
+def _heldout_metrics(params, batch, step, key, stats, cfg: Config) -> dict:
+    """The training step's metrics on a held-out batch, without dropout (``--eval-every``)."""
+    terms = loss_terms(params, batch, key, step, cfg=cfg, pose_mean=stats["mean"], pose_std=stats["std"],
+                       deterministic=True)
+    return {k: jnp.mean(v) for k, v in terms.items()}
+
+
+def _heldout_data(eval_data, skeleton, data, model, progress):
+    """The held-out clips of ``eval_data`` as training data, normalised with the training statistics."""
+    clips = [c for c in load_folder(eval_data, progress=progress) if c.audio is not None]
+    if not clips:
+        raise DataError(f"{eval_data}: no held-out clip has audio (ZeroEGGS needs BVH + WAV pairs)")
+    for c in clips:
+        if c.motion.skeleton.signature() != skeleton.signature():
+            raise DataError(f"{c.path}: held-out clip on another skeleton than the training data")
+    return zdata.build(clips, fps=model.fps, mirror=False, speeds=(1.0,), pose_stats=data.pose_stats,
+                       speech_stats=data.speech_stats, progress=progress, loudness=model.loudness,
+                       input_norm=model.input_norm)
+
+
 def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = None, seed: int = 0,
           devices: Optional[int] = None, progress: bool = True, log_every: int = 25,
-          ckpt_every: Optional[int] = None, overrides: Optional[dict] = None) -> dict:
+          ckpt_every: Optional[int] = None, overrides: Optional[dict] = None, eval_data=None,
+          eval_every: Optional[int] = None, tb_dir=None, profile_dir=None) -> dict:
     """Train (or resume) ZeroEGGS on ``data_dir``; returns a summary dict (final metrics, wall time, steps/s).
 
     ``steps``: total steps (default: the preset's ``train.steps``); ``overrides``: dotted config fields
-    (``{"model.gru_hidden": 128, "train.learning_rate": 3e-4}``).
+    (``{"model.gru_hidden": 128, "train.learning_rate": 3e-4}``). ``eval_data`` / ``eval_every``: the loss
+    on held-out clips (normalised with the training statistics; :data:`~jaxgest.runtime.training.EVAL_BATCHES`
+    fixed batches, dropout off, the style sample from a fixed key) every ``eval_every`` steps, logged as
+    ``eval_loss``, ``eval_recon``, ... (:func:`jaxgest.runtime.training.train_loop`); ``tb_dir``: TensorBoard
+    events too; ``profile_dir``: a :func:`jax.profiler.trace` of a few steps.
     """
     parallel.maybe_initialize_distributed()
     check_steps(steps=steps)
-    check_intervals(log_every=log_every, ckpt_every=ckpt_every)
+    check_intervals(log_every=log_every, ckpt_every=ckpt_every, eval_every=eval_every)
+    check_eval(eval_data, eval_every, log_every)
     if data_dir is None:
         raise JaxgestError("zeggs train: no data folder given")
     t0 = time.perf_counter()
@@ -98,6 +127,9 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
                            input_norm=model.input_norm, speech_method=model.speech_features)
         if data.pose_dim != model.pose_dim:
             raise DataError(f"{data_dir}: pose features have {data.pose_dim} channels, the model expects {model.pose_dim}")
+        heldout = None
+        if eval_data is not None:
+            heldout = _heldout_data(eval_data, skeleton, data, model, progress)
 
         mesh = parallel.make_mesh(devices)
         info = parallel.device_info(mesh)
@@ -134,13 +166,27 @@ def train(data_dir, workdir, *, preset: str = "tiny", steps: Optional[int] = Non
                               sampling=tcfg.style_sampling)
 
         batches = parallel.sharded_batch_fn(batch_fn, mesh)
-        logger = MetricsLogger(workdir, extra={"stage": wd.KIND, **info})
+        eval_fn = None
+        if heldout is not None:
+            def heldout_batch(k):
+                return heldout.batch(k, seed=EVAL_SEED, batch=tcfg.batch_size, window=tcfg.window,
+                                     style_min=tcfg.style_window_min, style_max=tcfg.style_window_max,
+                                     sampling=tcfg.style_sampling)
+
+            fixed = [parallel.sharded_batch_fn(heldout_batch, mesh)(k) for k in range(EVAL_BATCHES)]
+            eval_fn = heldout_eval(_heldout_metrics, fixed, jax.random.key(EVAL_SEED), stats, cfg)
+        logger = MetricsLogger(workdir, extra={"stage": wd.KIND, **info},
+                               tb_dir=tb_dir if jax.process_index() == 0 else None)
         last = {}
-        state = train_loop(state, step_fn, batches, key=jax.random.key(seed + 1), num_steps=steps,
-                           checkpointer=ckpt, logger=logger, log_every=log_every,
-                           ckpt_every=ckpt_every if ckpt_every is not None else max(50, steps // 10), desc="zeggs",
-                           progress=progress,
-                           on_log=lambda s, m: last.update(m))
+        try:
+            state = train_loop(state, step_fn, batches, key=jax.random.key(seed + 1), num_steps=steps,
+                               checkpointer=ckpt, logger=logger, log_every=log_every,
+                               ckpt_every=ckpt_every if ckpt_every is not None else max(50, steps // 10),
+                               desc="zeggs", progress=progress, on_log=lambda s, m: last.update(m),
+                               eval_fn=eval_fn, eval_every=eval_every if eval_fn is not None else None,
+                               profile_dir=profile_dir)
+        finally:
+            logger.close()
         ckpt.close()
         wall = time.perf_counter() - t0
         return {"steps": steps, "start_step": start, "wall_s": wall, "final": last, "devices": info["devices"],

@@ -156,3 +156,114 @@ def test_viewer_plays_to_the_end_without_loop(page, browser):
     last = max(m.num_frames / m.fps for m in motions) - 1 / max(m.fps for m in motions)
     assert not done["playing"] and done["time"] == pytest.approx(last, abs=1e-6)
     assert [c["frame"] for c in done["clips"]] == [m.num_frames - 1 for m in motions]
+
+
+# ------------------------------------------------------------------------------------------------------
+# speech (issue 60): the embedded audio decodes, lasts as long as the WAV, and its clock leads the drawing
+
+SPEECH_FPS = 30.0
+
+
+@pytest.fixture(scope="module")
+def speech_page(tmp_path_factory):
+    """A 6 s synthetic clip at 30 fps beside the same clip at 60 fps, with its speech (WAV at 16 kHz)."""
+    import soundfile as sf
+
+    d = tmp_path_factory.mktemp("speech")
+    motion, audio, sr = render_clip(CONTENTS["greeting"].with_seed(0, 6.0), "neutral", seed=0)
+    sf.write(d / "speech.wav", audio, sr)
+    bvh.save(resample_motion(motion, SPEECH_FPS), d / "clip30.bvh")
+    bvh.save(motion, d / "clip60.bvh")
+    motions = [bvh.load(d / "clip30.bvh"), bvh.load(d / "clip60.bvh")]
+    out = render_html(motions, d / "speech.html", audio=d / "speech.wav")
+    return out, motions, sf.info(str(d / "speech.wav")).duration
+
+
+def _click(b, element_id):
+    """A real mouse click (a user gesture, which lets the page start sound)."""
+    x, y = b.evaluate(f"(r => [r.left + r.width / 2, r.top + r.height / 2])"
+                      f"(document.getElementById('{element_id}').getBoundingClientRect())")
+    for kind in ("mousePressed", "mouseReleased"):
+        b.send("Input.dispatchMouseEvent", {"type": kind, "x": x, "y": y, "button": "left", "clickCount": 1})
+
+
+def _wait(b, condition, what, seconds=20):
+    """Poll ``condition`` (JavaScript over ``i = jaxgestViewer.info()``) until it holds; that info."""
+    got = b.evaluate("new Promise(r => { const t0 = performance.now(); (function wait() {"
+                     " const i = jaxgestViewer.info();"
+                     f" if ({condition}) r({{ok: true, info: i}});"
+                     f" else if (performance.now() - t0 > {seconds * 1000}) r({{ok: false, info: i}});"
+                     " else setTimeout(wait, 20); })(); })", await_promise=True)
+    assert got["ok"], (what, got["info"])
+    return got["info"]
+
+
+def test_speech_plays_with_the_motion(speech_page, browser):
+    path, motions, wav_seconds = speech_page
+    url = path.resolve().as_uri()
+    b = browser
+    n_events = len(b.events)
+    b.open(url + "#paused=1")
+    assert "media-src data:" in b.evaluate(
+        "document.querySelector('meta[http-equiv=Content-Security-Policy]').content")
+    assert b.evaluate("document.getElementById('jaxgest-audio').src.startsWith('data:audio/')")
+    # the audio decodes, and lasts as long as the WAV (within one frame of the slowest clip)
+    i = _wait(b, "i.audio.readyState >= 2", "audio decoded")
+    assert i["audio"]["duration"] == pytest.approx(wav_seconds, abs=1 / SPEECH_FPS)
+    assert i["audio"]["paused"] and i["clock"] == "wall" and not i["playing"]
+
+    # play (a real click): the audio plays and its clock leads
+    _click(b, "play")
+    i = _wait(b, "i.clock === 'audio'", "the audio clock leads after play")
+    assert i["playing"] and not i["audio"]["paused"] and not i["audio"]["blocked"]
+    # advance the audio: the drawn frame follows the audio's time (not the wall clock's)
+    target = 3.0 if i["time"] < 2.0 else 0.25  # far from where the wall clock would be
+    b.evaluate(f"jaxgestViewer.audio.currentTime = {target}")
+    i = _wait(b, f"i.audio.drawnAt !== null && i.audio.drawnAt >= {target} "
+                 f"&& i.audio.drawnAt < {target + 2.5}", "a frame drawn at the advanced audio time")
+    at = i["audio"]["drawnAt"]
+    assert i["clock"] == "audio" and i["time"] == at
+    assert [c["frame"] for c in i["clips"]] == [min(m.num_frames - 1, round(at * m.fps)) for m in motions]
+
+    # speed drives the audio's rate; pause pauses it; scrubbing moves it
+    b.evaluate("(s => { s.value = '2'; s.dispatchEvent(new Event('change')); })"
+               "(document.getElementById('speed'))")
+    assert b.evaluate("jaxgestViewer.audio.playbackRate") == 2
+    _click(b, "play")
+    i = b.evaluate("jaxgestViewer.info()")
+    assert not i["playing"] and i["audio"]["paused"]
+    i = b.evaluate("jaxgestViewer.setTime(1.25)")
+    assert i["audio"]["currentTime"] == pytest.approx(1.25, abs=1e-3) and i["time"] == pytest.approx(1.25)
+
+    # loop: from near the end, play wraps the motion and the audio back to the start
+    last = max(m.duration for m in motions) - 1 / max(m.fps for m in motions)
+    b.evaluate(f"jaxgestViewer.setTime({last - 0.3})")
+    _click(b, "play")
+    i = _wait(b, "i.time < 1.0 && i.playing", "looped back to the start")
+    assert i["audio"]["currentTime"] < 1.5 and not i["audio"]["paused"]
+
+    new = b.events[n_events:]  # this test's (the browser is shared)
+    requests = {e["params"]["request"]["url"].split("#")[0] for e in new
+                if e["method"] == "Network.requestWillBeSent"}
+    assert requests <= {url, "about:blank"}, requests
+    assert not [e for e in new if e["method"] == "Runtime.exceptionThrown"]
+    status = json.loads(b.evaluate("document.getElementById('jaxgest-status').textContent"))
+    assert status["errors"] == [] and status["resources"] == []
+
+
+def test_speech_page_before_any_gesture(speech_page, browser):
+    """Opened playing, the page either plays the speech at once or (autoplay refused until the user touches
+    the page, as Chromium does) plays the motion on the wall clock and says how to hear the speech."""
+    path, motions, _ = speech_page
+    b = browser
+    b.open(path.resolve().as_uri())
+    i = _wait(b, "i.time > 0.2 && (i.clock === 'audio' || i.audio.blocked)", "playing")
+    hint_hidden = b.evaluate("document.getElementById('soundHint').hidden")
+    if i["audio"]["blocked"]:
+        assert i["clock"] == "wall" and i["audio"]["paused"] and not hint_hidden
+        # any key is a gesture that lets the page start sound
+        b.send("Input.dispatchKeyEvent", {"type": "keyDown", "key": "o", "code": "KeyO"})
+        b.send("Input.dispatchKeyEvent", {"type": "keyUp", "key": "o", "code": "KeyO"})
+        i = _wait(b, "i.clock === 'audio'", "the speech joins at the first key press")
+    assert not i["audio"]["blocked"] and i["playing"]
+    assert b.evaluate("document.getElementById('soundHint').hidden")

@@ -45,6 +45,7 @@ def test_tgst_evaluate_html(tiny, tmp_path, capsys):
     assert titles[0] == "content" and titles[1].startswith("style (")
     assert titles[2].startswith("soft: ") and titles[3].startswith("adain: ")
     assert data["heading"].startswith("best pair (soft): ")
+    assert data["audio"] is None  # no speech in style transfer
 
 
 @pytest.mark.slow
@@ -63,6 +64,11 @@ def test_zeggs_evaluate_html(tiny, tmp_path, capsys):
     titles, data = _titles(out / "best.html")
     assert titles[0].startswith("generated: BeatAlign") and titles[1].startswith("real: ")
     assert data["options"]["trails"] and len(data["clips"]) == 3
+    # the page plays the clip's speech (issue 60): as long as the page, from the clip's first frame
+    speech = data["audio"]
+    assert speech is not None and speech["src"].startswith("data:audio/") and speech["offset"] == 0
+    assert speech["duration"] == pytest.approx(max(c["duration"] for c in data["clips"]), abs=1 / 16000)
+    assert "media-src data:" in (out / "best.html").read_text()
     capsys.readouterr()
 
 

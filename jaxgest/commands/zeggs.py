@@ -8,6 +8,8 @@ import pathlib
 from jaxgest.commands.common import add_train_arguments, overrides, training_data, watch_arguments
 from jaxgest.runtime.errors import DataError, JaxgestError
 from jaxgest.zeggs.config import PRESETS
+
+AUTHORS_PRESETS = ("authors", "authors-tiny")  # jaxgest.zeggs.official.train.PRESETS (imported lazily)
 from jaxgest.zeggs.claims import SPEECH_STYLES, SUBSTITUTES
 
 
@@ -18,10 +20,11 @@ def register(subparsers) -> None:
 
     t = sub.add_parser("train", help="train (or resume) on a folder of BVH + WAV clips")
     add_train_arguments(
-        t, presets=PRESETS, workdir_help="run folder (checkpoints, stats, metrics.jsonl)",
+        t, presets=tuple(PRESETS) + AUTHORS_PRESETS, workdir_help="run folder (checkpoints, stats, metrics.jsonl)",
         data_help="folder: ZEGGS layout or manifest.csv with audio (default: the built-in synthetic data, "
         "written to W/synthetic-data)",
-        steps_help="total training steps (default: the preset's, tiny 300, small 8000, paper 120000)",
+        steps_help="total training steps (default: the preset's, tiny 300, small 8000, paper 120000, "
+        "authors 160000, authors-tiny 20)",
         ckpt_every=None, ckpt_help="checkpoint every N steps and at the end (default: a tenth of the steps, "
         "at least 50)")
     t.add_argument("--no-loudness", action="store_true",
@@ -107,11 +110,38 @@ def register(subparsers) -> None:
     e.set_defaults(func=_evaluate)
 
 
+def _train_authors(args) -> int:
+    """``--preset authors | authors-tiny``: the authors' network on their representation and objective
+    (:mod:`jaxgest.zeggs.official.train`)."""
+    from jaxgest.zeggs.official.train import train
+
+    unsupported = [flag for flag, on in (("--override", args.override), ("--devices", args.devices),
+                                         ("--no-loudness", args.no_loudness), ("--eval-every", args.eval_every),
+                                         ("--eval-data", args.eval_data), ("--tb", args.tb),
+                                         ("--profile", args.profile)) if on]
+    if unsupported:
+        raise JaxgestError(f"--preset {args.preset} (the authors' network) does not take {', '.join(unsupported)} "
+                           "yet; the jaxgest presets (tiny, small, paper) do")
+    data = training_data(args)
+    r = train(data, args.workdir, preset=args.preset, steps=args.steps, seed=args.seed, ckpt_every=args.ckpt_every,
+              log_every=args.log_every)
+    if r["start_step"] >= r["steps"]:
+        print(f"zeggs: {args.workdir} is already trained to step {r['start_step']} (>= --steps {r['steps']}); "
+              "nothing to do (raise --steps to continue)")
+        return 0
+    print(f"zeggs: trained the authors' network {r['steps']} steps (resumed from {r['start_step']}) in "
+          f"{r['wall_s']:.1f} s; final loss {r['final'].get('loss', float('nan')):.4g}; workdir {args.workdir} "
+          "(generate with: jaxgest zeggs generate)")
+    return 0
+
+
 def _train(args) -> int:
     from jaxgest.runtime.config import apply_overrides
     from jaxgest.zeggs.config import preset
     from jaxgest.zeggs.trainer import DATA_FIELDS, train
 
+    if args.preset in AUTHORS_PRESETS:
+        return _train_authors(args)
     changes = {**overrides(args), **({"model.loudness": False} if args.no_loudness else {})}
     apply_overrides(preset(args.preset), changes, model="ZeroEGGS", forbidden=DATA_FIELDS)  # a bad one writes nothing
     data = training_data(args)  # steps and intervals checked before any data is written

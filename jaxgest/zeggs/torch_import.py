@@ -85,7 +85,7 @@ def speech_encoder_params(source: Any, cfg: Optional[ModelConfig] = None, *, nam
                                   f"{key.split('.')[0]} of speech_channels={cfg.speech_channels}, "
                                   f"speech_kernels={cfg.speech_kernels}, speech_embedding={cfg.speech_embedding})")
         if not np.all(np.isfinite(a)):
-            raise CheckpointError(f"{name}: {key} contains NaN or inf")
+            raise CheckpointError(f"{name}: parameter {key} contains NaN or inf")
         arrays[key] = a.astype(np.float32)
     params = {}
     n = len(cfg.speech_channels)

@@ -22,12 +22,12 @@ References: Ghorbani et al. 2023, §3.1, §4.2; the authors' ``ZEGGS/modules.py`
 from __future__ import annotations
 
 import pathlib
-import sys
 from typing import Any, Mapping, Optional
 
 import numpy as np
 
 from jaxgest.runtime.errors import CheckpointError
+from jaxgest.zeggs.authors_path import their_code_on_path
 from jaxgest.zeggs.config import ModelConfig
 
 #: The released encoders' sizes (both v1 and v2).
@@ -109,18 +109,12 @@ def load_torch_speech_encoder(path, code_dir) -> dict:
         import torch
     except ImportError:
         raise CheckpointError(f"{path}: reading a PyTorch file needs torch (pip install 'jaxgest[authors]')") from None
-    saved, before = list(sys.path), set(sys.modules)
-    sys.path.insert(0, str(code_dir.resolve()))
     try:
-        module = torch.load(str(path), map_location="cpu", weights_only=False)
-        return speech_encoder_params(module, name=str(path))
+        with their_code_on_path(code_dir):  # the authors' modules (e.g. "modules", "audio") leave with their path
+            module = torch.load(str(path), map_location="cpu", weights_only=False)
+            return speech_encoder_params(module, name=str(path))
     except CheckpointError:
         raise
     except Exception as e:  # unpickling errors have many types
         raise CheckpointError(f"{path}: unreadable PyTorch file ({type(e).__name__}: "
                               f"{str(e).splitlines()[0][:120] if str(e) else ''})") from None
-    finally:
-        sys.path[:] = saved
-        for k in set(sys.modules) - before:  # the authors' modules (e.g. "modules", "audio") leave with their path
-            if str(getattr(sys.modules[k], "__file__", "") or "").startswith(str(code_dir.resolve())):
-                del sys.modules[k]

@@ -179,8 +179,12 @@ def _assert_same_params(a: pathlib.Path, b: pathlib.Path, init: pathlib.Path) ->
 #: rounding to 1.9e-5 by step 4 (0.02 of one step of its lr 1e-3; in 1-25 % of a leaf's elements), and ONE
 #: device under another XLA threading (another reduction order, no sharding at all) differs from the default
 #: run by as much (1.7e-5 at step 4, 1,009 elements, on an Intel Xeon; under 1e-6 on the machines before).
-#: So its final checkpoint is held to 0.1 lr and its losses to rtol 1e-4, its first checkpoint to ``STRICT``
-#: (a wrong cross-device mean would put it a whole step off).
+#: So its final checkpoint is held to 0.1 lr and its losses to rtol 1e-4, its first checkpoint to ``FIRST``:
+#: ``STRICT`` except a handful of elements (<= 0.1 % of a leaf, at least one) within Adam's bound: RAdam's
+#: first steps are lr * momentum, proportional to the gradient, so a large gradient element carries the
+#: rounding of the cross-device sum into the parameter (seen: 1 of 35,712 elements of a GRU input kernel
+#: 1.25e-6 apart at step 2 with the authors' speech features as input). A gradient of the wrong scale or a
+#: per-device gradient moves nearly every element (test_zeggs_first_steps_see_the_gradient_scale).
 _TR_LR = tgst_preset("tiny").train.transformer.learning_rate
 _ZE_LR = zeggs_preset("tiny").train.learning_rate
 ADAM_NOISE = {"transformer": {"atol": 0.02 * _TR_LR, "handful": 0.002, "lr": _TR_LR,
@@ -188,18 +192,19 @@ ADAM_NOISE = {"transformer": {"atol": 0.02 * _TR_LR, "handful": 0.002, "lr": _TR
               "zeggs": {"atol": 0.1 * _ZE_LR, "handful": 0.0, "lr": _ZE_LR, "zero_gradient": set(),
                         "strict_first_checkpoint": True}}
 STRICT = {"atol": 1e-6, "handful": 0.0, "lr": 0.0, "zero_gradient": set()}
+FIRST = {"atol": 1e-6, "handful": 0.001, "lr": _ZE_LR, "zero_gradient": set()}
 #: per real model: the relative tolerance of the logged losses (ZeroEGGS: the amplified rounding above)
 LOSS_RTOL = {"tgst": 1e-5, "zeggs": 1e-4}
 
 
 def _assert_same_checkpoint(one: pathlib.Path, four: pathlib.Path, stage: str, step: int,
-                            strict: bool = False) -> None:
+                            noise: dict | None = None) -> None:
     """The parameters of two runs' checkpoints of ``stage`` at ``step`` agree up to float reassociation of
-    the cross-device sums (``ADAM_NOISE``, ``STRICT`` otherwise or with ``strict``)."""
+    the cross-device sums (``noise``; by default ``ADAM_NOISE`` of the stage, ``STRICT`` otherwise)."""
     pa, pb = params_at(one / "checkpoints" / stage, step), params_at(four / "checkpoints" / stage, step)
     assert sorted(pa) == sorted(pb)
     params = [k for k in pa if k.startswith("['params']")]
-    noise = STRICT if strict else ADAM_NOISE.get(stage, STRICT)
+    noise = noise or ADAM_NOISE.get(stage, STRICT)
     assert params and noise["zero_gradient"] <= set(params)
     for k in params:
         differ = ~np.isclose(pb[k], pa[k], rtol=1e-5, atol=noise["atol"])
@@ -322,7 +327,7 @@ def test_real_models_train_on_four_devices_like_one(real_runs, tgst_workdir, zeg
     for stage, step in REAL_STAGES[kind].items():
         _assert_same_checkpoint(one, four, stage, step)
         if ADAM_NOISE.get(stage, {}).get("strict_first_checkpoint"):
-            _assert_same_checkpoint(one, four, stage, CKPT_EVERY, strict=True)
+            _assert_same_checkpoint(one, four, stage, CKPT_EVERY, noise=FIRST)
 
 
 # ----- the gradient's scale ---------------------------------------------------------------------------------
@@ -419,8 +424,8 @@ def test_gradient_scale_check_can_fail():
 
 
 def test_zeggs_first_steps_see_the_gradient_scale():
-    """ZeroEGGS's optimiser (RAdam) moves 4x as far for a 4x gradient in every step up to the strictly
-    compared first checkpoint (CKPT_EVERY), so that comparison catches a gradient of the wrong scale."""
+    """ZeroEGGS's optimiser (RAdam) moves 4x as far for a 4x gradient in every step up to the closely
+    compared first checkpoint (CKPT_EVERY, ``FIRST``), so that comparison catches a gradient of the wrong scale."""
     tx = zeggs_steps.make_optimizer(zeggs_preset("tiny"))
     params = {"w": jnp.array([0.3, -1.2, 0.01, 2.0])}
     grads = [{"w": jnp.array([0.5, -0.1, 1e-3, 2.0]) * (1 + i)} for i in range(CKPT_EVERY)]

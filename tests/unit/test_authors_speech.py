@@ -300,9 +300,12 @@ def test_released_speech_encoder_runs_in_jaxgest(version):
     print(f"{version}: max abs {np.abs(got - ref).max():.2e}, max |out| {np.abs(ref).max():.3f}, relative {rel:.2e}")
     assert got.shape == ref.shape == (CROP_S * 60, 64) and rel <= 1e-5
     # The loader (torch.load with their folder on sys.path) gives the same parameters, and leaves no module behind.
+    before, path_before = set(sys.modules), list(sys.path)
     loaded = torch_import.load_torch_speech_encoder(pt, ZEGGS_CODE)
     jax.tree_util.tree_map(np.testing.assert_array_equal, loaded, params)
-    assert "modules" not in sys.modules
+    theirs = str(ZEGGS_CODE.resolve())
+    left = [k for k in set(sys.modules) - before if str(getattr(sys.modules[k], "__file__", "") or "").startswith(theirs)]
+    assert not left and sys.path == path_before, left
     # Control: with the kernels not transposed (torch's layout read as Flax's) the outputs differ.
     bad = {**params, "linear": {**params["linear"], "kernel": params["linear"]["kernel"].T}}
     assert np.abs(np.asarray(SpeechEncoder(cfg).apply({"params": bad}, x[None]))[0] - ref).max() > 1e-3

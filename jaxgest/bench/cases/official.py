@@ -24,13 +24,13 @@ import importlib
 import importlib.util
 import os
 import pathlib
-import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgest.bench.harness import Case, Impl
+from jaxgest.zeggs.authors_path import their_code_on_path
 from jaxgest.zeggs.official import network, quat
 
 JOINTS, SPEECH, STYLE, HIDDEN = 75, 64, 64, 1024
@@ -55,10 +55,9 @@ def missing_reason() -> str | None:
 
 @functools.lru_cache(maxsize=None)
 def _their_modules():
-    path = str(code_dir())
-    if path not in sys.path:
-        sys.path.insert(0, path)
-    return importlib.import_module("modules")
+    """Their ``modules.py``, imported with their folder on the path only meanwhile (nothing left behind)."""
+    with their_code_on_path(code_dir()):
+        return importlib.import_module("modules")
 
 
 @functools.lru_cache(maxsize=None)

@@ -42,7 +42,7 @@ from jaxgest.zeggs.official.release import Release, read_workdir
 
 
 def _bucket(n: int) -> int:
-    from jaxgest.zeggs.inference import bucket_length
+    from jaxgest.zeggs.inputs import bucket_length
 
     return bucket_length(n)
 
@@ -152,7 +152,7 @@ class OfficialZeggs:
                  normalize_weights: bool = False, pca_edits: Optional[dict] = None,
                  weight_format: str = "fp32") -> Motion:
         """Gestures for ``audio`` in the (blended) style of ``styles`` on the ZEGGS rig at 60 fps (module doc)."""
-        from jaxgest.zeggs.inference import audio_input, validate_weights
+        from jaxgest.zeggs.inputs import audio_input, validate_weights
 
         if weight_format != "fp32":
             raise JaxgestError(f"an imported authors' model runs in fp32 only, got weight format {weight_format!r}")

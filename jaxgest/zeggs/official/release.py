@@ -28,7 +28,6 @@ from __future__ import annotations
 import hashlib
 import json
 import pathlib
-import sys
 from dataclasses import dataclass
 from typing import Mapping
 
@@ -36,6 +35,7 @@ import numpy as np
 
 from jaxgest.runtime.errors import CheckpointError, DataError
 from jaxgest.runtime.io import atomic_output, write_json_atomic
+from jaxgest.zeggs.authors_path import their_code_on_path
 
 FORMAT = "jaxgest-zeggs-official/1"
 MANIFEST, PARAMS, STATS = "official.json", "official_params.npz", "official_stats.npz"
@@ -80,19 +80,12 @@ def _load_module(path: pathlib.Path, code_dir: pathlib.Path) -> dict[str, np.nda
     except ImportError:
         raise DataError("importing the authors' models needs PyTorch to read their .pt files: "
                         "pip install 'jaxgest[authors]' (or pip install torch)") from None
-    saved, before = list(sys.path), set(sys.modules)
-    root = str(code_dir.resolve())
-    sys.path.insert(0, root)
     try:
-        module = torch.load(str(path), map_location="cpu", weights_only=False)
+        with their_code_on_path(code_dir):  # their generic names ("modules", "anim") leave with their path
+            module = torch.load(str(path), map_location="cpu", weights_only=False)
     except Exception as e:  # noqa: BLE001 -- unpickling can raise anything; name the file, no traceback
         raise DataError(f"{path}: cannot be read as the authors' pickled module ({e.__class__.__name__}: "
                         f"{str(e).splitlines()[0][:160] if str(e) else ''})") from None
-    finally:
-        sys.path[:] = saved
-        for k in set(sys.modules) - before:  # their generic names ("modules", "anim") leave with their path
-            if str(getattr(sys.modules[k], "__file__", "") or "").startswith(root):
-                del sys.modules[k]
     state = module.state_dict() if hasattr(module, "state_dict") else module
     if not isinstance(state, Mapping):
         raise DataError(f"{path}: holds a {type(module).__name__}, not a torch module or state dict")

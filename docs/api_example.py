@@ -1,7 +1,7 @@
 import jaxgest as jg
 
-tgst = jg.tgst.load("runs/tgst")  # a workdir of `jaxgest tgst train`
-styled = tgst.transfer("content.bvh", "style.bvh", method="soft")  # BVH paths or jg.Motion objects
+tgst = jg.tgst.load("runs/tgst")  # a workdir of `jaxgest tgst train`; the model gets style.bvh + its mirror
+styled = tgst.transfer("content.bvh", "style.bvh", method="soft")  # or "coherent", style_input="as-is"
 jg.save_bvh(styled, "styled.bvh")
 
 zeggs = jg.zeggs.load("runs/zeggs")  # a workdir of `jaxgest zeggs train`

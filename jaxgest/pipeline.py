@@ -42,8 +42,12 @@ def audio_duration(audio, sr: Optional[int] = None) -> float:
 
 def speech_to_styled_gestures(audio, style: Motion, *, zeggs_workdir, tgst_workdir,
                               zeggs_style: Optional[Motion] = None, method: str = "soft", seed: int = 0,
-                              temperature: float = 1.0, sr: Optional[int] = None) -> tuple[Motion, Motion, dict]:
+                              temperature: float = 1.0, sr: Optional[int] = None,
+                              style_input: str = "mirror") -> tuple[Motion, Motion, dict]:
     """Speech (path or array with ``sr``) -> (styled Motion on ``style``'s rig, ZEGGS output, timings in s).
+
+    ``method`` and ``style_input`` (``"mirror"``: the exemplar followed by its mirror, the default; ``"as-is"``)
+    as in :meth:`jaxgest.tgst.api.TGSTModel.transfer`.
 
     Raises the models' DataError / CheckpointError (bad audio, too-short clips, missing checkpoints).
     """
@@ -57,7 +61,8 @@ def speech_to_styled_gestures(audio, style: Motion, *, zeggs_workdir, tgst_workd
     generated = zeggs.generate(audio, [zeggs_style if zeggs_style is not None else style], seed=seed,
                                temperature=temperature, sr=sr, name="zeggs")
     t2 = time.perf_counter()
-    styled = tgst.transfer(generated, style, method=method, name=f"speech in the style of {style.name or 'style'}")
+    styled = tgst.transfer(generated, style, method=method, name=f"speech in the style of {style.name or 'style'}",
+                           style_input=style_input)
     styled = to_rig(styled, style, fps=style.fps, frames=max(1, int(round(audio_duration(audio, sr) * style.fps))))
     t3 = time.perf_counter()
     return styled, generated, {"load_s": t1 - t0, "zeggs_s": t2 - t1, "tgst_s": t3 - t2}

@@ -26,6 +26,7 @@ import pathlib
 import time
 
 from jaxgest.runtime.errors import DataError
+from jaxgest.tgst.config import STYLE_INPUTS
 from jaxgest.tgst.model import METHODS
 
 #: (synthetic clips, seconds, TGST AE steps, TGST transformer steps, ZEGGS steps, GIF seconds)
@@ -44,6 +45,9 @@ def register(subparsers) -> None:
     d.add_argument("--out", default="jaxgest-demo", help="output folder (default: ./jaxgest-demo)")
     d.add_argument("--quick", action="store_true", help="smaller data and training (about 2 minutes)")
     d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--style-input", default="mirror", choices=STYLE_INPUTS,
+                   help="style clip the TGST model is given: the exemplar followed by its mirror (default, the "
+                   "experiments' input) or as is")
     d.set_defaults(func=_demo)
 
     p = subparsers.add_parser("pipeline", help="speech -> ZeroEGGS gestures -> TGST style transfer")
@@ -54,6 +58,8 @@ def register(subparsers) -> None:
     p.add_argument("--zeggs-style", default=None, metavar="N.bvh",
                    help="style clip for ZeroEGGS, e.g. a neutral one (default: the --style exemplar)")
     p.add_argument("--method", default="soft", choices=METHODS)
+    p.add_argument("--style-input", default="mirror", choices=STYLE_INPUTS,
+                   help="style clip TGST is given: the exemplar followed by its mirror (default) or as is")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--temperature", type=float, default=1.0)
     p.add_argument("--out", required=True, metavar="O.bvh")
@@ -80,7 +86,8 @@ def _pipeline(args) -> int:
     zstyle = _load_bvh(args.zeggs_style) if args.zeggs_style else None
     styled, _, t = speech_to_styled_gestures(args.audio, style, zeggs_workdir=args.zeggs_workdir,
                                              tgst_workdir=args.tgst_workdir, zeggs_style=zstyle,
-                                             method=args.method, seed=args.seed, temperature=args.temperature)
+                                             method=args.method, seed=args.seed, temperature=args.temperature,
+                                             style_input=args.style_input)
     bvh.save(styled.replace(name=out.stem), out)
     print(f"pipeline: wrote {out} ({styled.num_frames} frames at {styled.fps:g} fps on the style's skeleton; "
           f"zeggs {t['zeggs_s']:.1f} s, tgst {t['tgst_s']:.1f} s)")
@@ -110,8 +117,9 @@ def _round(x, nd=4):
     return x
 
 
-def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) -> dict:
-    """Run the whole demo into ``out``; returns the metrics dict (also written to ``out/metrics.json``)."""
+def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True, style_input: str = "mirror") -> dict:
+    """Run the whole demo into ``out``; returns the metrics dict (also written to ``out/metrics.json``).
+    ``style_input``: what the TGST transfers are given as the style clip (``TGSTModel.transfer``)."""
     from jaxgest.runtime.io import check_output_path
     from jaxgest.motion import bvh
     from jaxgest.audio import load_audio
@@ -166,7 +174,8 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
         truth, _ = _clip(data, CONTENT, style_name)  # the content performed in the style: ground truth
         panels, titles, per_method = [content, style], [f"content ({NEUTRAL})", f"style ({style_name})"], {}
         for method in tev.TRANSFER_METHODS:
-            result = tgst.transfer(content, style, method=method, name=f"{CONTENT}_{style_name}_{method}")
+            result = tgst.transfer(content, style, method=method, name=f"{CONTENT}_{style_name}_{method}",
+                                   style_input=style_input)
             bvh.save(result, results / f"transfer_{style_name}_{method}.bvh")
             per_method[method] = dict(tev.clip_errors(result, content, style, truth, protocol=TRANSFER_PROTOCOL),
                                       protocol=TRANSFER_PROTOCOL)
@@ -228,7 +237,7 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     exemplar, _ = _clip(data, CONTENT, STYLES[0])
     styled, zeggs_out, ptimes = speech_to_styled_gestures(audio, exemplar, zeggs_workdir=out / "zeggs",
                                                           tgst_workdir=out / "tgst", zeggs_style=neutral_example,
-                                                          seed=seed, sr=sr)
+                                                          seed=seed, sr=sr, style_input=style_input)
     bvh.save(zeggs_out, results / "pipeline_zeggs_neutral.bvh")
     bvh.save(styled, results / f"pipeline_{STYLES[0]}.bvh")
     pipeline_titles = [f"ZeroEGGS ({NEUTRAL})", f"+ TGST ({STYLES[0]})", "style exemplar"]
@@ -246,7 +255,7 @@ def run_demo(out, *, quick: bool = False, seed: int = 0, progress: bool = True) 
     timings["total_s"] = time.perf_counter() - t_all
 
     report = {
-        "mode": "quick" if quick else "full", "seed": seed, "plan": plan,
+        "mode": "quick" if quick else "full", "seed": seed, "plan": plan, "style_input": style_input,
         "tgst_training": {k: tgst_summary[k] for k in ("ae", "transformer", "windows")},
         "zeggs_training": {k: v for k, v in zeggs_summary.items() if k in ("steps", "final", "wall_s")},
         "style_transfer": transfer,
@@ -323,5 +332,5 @@ def summary_table(report: dict) -> str:
 
 
 def _demo(args) -> int:
-    run_demo(args.out, quick=args.quick, seed=args.seed)
+    run_demo(args.out, quick=args.quick, seed=args.seed, style_input=args.style_input)
     return 0

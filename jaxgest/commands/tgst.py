@@ -6,7 +6,7 @@ import pathlib
 
 from jaxgest.commands.common import add_train_arguments, overrides, training_data, watch_arguments
 from jaxgest.runtime.errors import DataError
-from jaxgest.tgst.config import PRESETS, InferenceConfig
+from jaxgest.tgst.config import PRESETS, STYLE_INPUTS, InferenceConfig
 from jaxgest.tgst.model import METHODS
 
 
@@ -34,7 +34,12 @@ def register(subparsers) -> None:
     x.add_argument("--style", required=True, metavar="S.bvh")
     x.add_argument("--out", required=True, metavar="O.bvh", help="output BVH (content's skeleton and length)")
     x.add_argument("--method", default=InferenceConfig.method, choices=METHODS,
-                   help="soft swap (paper), hard swap, AdaIN or Avatar-net baselines")
+                   help="soft swap (paper, default), hard swap, AdaIN or Avatar-net baselines; coherent (not in "
+                   "the paper: one constant-rate path through the style, for an exemplar of the same gesture or "
+                   "its mirror); autoencoder (the content's round trip)")
+    x.add_argument("--style-input", default="mirror", choices=STYLE_INPUTS,
+                   help="style clip the model is given: the exemplar followed by its mirror (default, the input "
+                   "of the experiments' results) or as is")
     x.set_defaults(func=_transfer)
 
     register_evaluate(sub)
@@ -68,10 +73,11 @@ def _transfer(args) -> int:
     content = bvh.load(args.content).replace(name=str(args.content))
     style = bvh.load(args.style).replace(name=str(args.style))
     model = load_model(args.workdir)
-    result = model.transfer(content, style, method=args.method, name=out.stem)
+    result = model.transfer(content, style, method=args.method, name=out.stem, style_input=args.style_input)
     bvh.save(result, out)
+    given = "its mirror appended" if args.style_input == "mirror" else "as is"
     print(f"tgst: wrote {out} ({result.num_frames} frames at {result.fps:g} fps, {args.method} swap of "
-          f"{pathlib.Path(args.content).name} in the style of {pathlib.Path(args.style).name})")
+          f"{pathlib.Path(args.content).name} in the style of {pathlib.Path(args.style).name}, {given})")
     return 0
 
 
@@ -150,7 +156,7 @@ def _evaluate(args) -> int:
 
 def register_evaluate(tgst_subparsers) -> None:
     """Add ``evaluate`` to the ``jaxgest tgst`` subcommands (docs/design.md §6): paper Tables 2-3 (and 1)."""
-    from jaxgest.tgst.evaluate import DEFAULT_BUCKET, PAIR_MODES, PROTOCOLS, TRANSFER_METHODS
+    from jaxgest.tgst.evaluate import DEFAULT_BUCKET, EVALUATE_METHODS, PAIR_MODES, PROTOCOLS
 
     p = tgst_subparsers.add_parser(
         "evaluate", help="content/style errors of style transfers (paper Tables 2-3)"
@@ -160,7 +166,8 @@ def register_evaluate(tgst_subparsers) -> None:
     p.add_argument("--json", required=True, help="output JSON file")
     p.add_argument("--pairs", choices=PAIR_MODES, default="intra", help="intra-, inter-scenario or all pairs")
     p.add_argument("--methods", default=None,
-                   help=f"comma-separated methods (default: {','.join(TRANSFER_METHODS)}; also: autoencoder)")
+                   help=f"comma-separated methods (default: {','.join(EVALUATE_METHODS)}: the paper's four and "
+                   "the coherent swap, not in the paper; also: autoencoder)")
     p.add_argument("--protocol", choices=tuple(PROTOCOLS), default="authors",
                    help="authors (default, paper tables): root-local positions, forward differences, 1 s cut at "
                    "both ends, mirrored style appended; world: world positions, no cut, no mirror")

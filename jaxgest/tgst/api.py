@@ -154,15 +154,22 @@ class TGSTModel:
         return content_floor_contact(written, content, tolerance=tol)
 
     def transfer(self, content, style, method: str = "soft", name: Optional[str] = None,
-                 tolerance: Optional[float] = None) -> Motion:
+                 tolerance: Optional[float] = None, style_input: str = "mirror") -> Motion:
         """``content`` performed in the style of ``style``, on the content's skeleton (module docstring).
 
-        ``content`` / ``style``: Motions or BVH paths; ``method``: one of :data:`METHODS`; ``tolerance``:
-        the floor contact's (:meth:`to_motion`; default per frame)."""
+        ``content`` / ``style``: Motions or BVH paths; ``method``: one of :data:`METHODS` (``"soft"``, the
+        paper's swap; ``"coherent"``, not in the paper, for an exemplar of the content's gesture or its mirror);
+        ``tolerance``: the floor contact's (:meth:`to_motion`; default per frame); ``style_input``: what the
+        model is given, ``"mirror"`` (default: the exemplar followed by its mirror, the input of the
+        experiments' results) or ``"as-is"`` (:func:`jaxgest.tgst.protocol.style_input_clip`)."""
+        from jaxgest.tgst.protocol import check_style_input, style_input_clip
+
         _check_method(method)
+        check_style_input(style_input)
         content, style = bvh.as_motion(content, "content"), bvh.as_motion(style, "style")
         cu = self.body_arrays(content, "content")
-        su = self.body_arrays(style, "style")
+        self.body_arrays(style, "style")  # the exemplar's own errors (too short, no joint map) first
+        su = self.body_arrays(style_input_clip(style, style_input), "style")
         up, lo = self.transfer_body(cu, su, method)
         out = self.to_motion(up, lo, content, tolerance=tolerance)
         return out.replace(name=name or f"{content.name or 'content'} in the style of {style.name or 'style'}")
@@ -233,11 +240,14 @@ def load(workdir) -> TGSTModel:
 load_model = load  # the name the CLI and older callers use
 
 
-def transfer(content, style, *, workdir, method: str = "soft") -> Motion:
+def transfer(content, style, *, workdir, method: str = "soft", style_input: str = "mirror") -> Motion:
     """Style transfer of two Motions (or BVH paths) with the model of ``workdir`` (docs/design.md §7), loaded now;
-    see :class:`TGSTModel`."""
+    see :meth:`TGSTModel.transfer` (``style_input``: ``"mirror"``, the default, or ``"as-is"``)."""
+    from jaxgest.tgst.protocol import check_style_input
+
     _check_method(method)
-    return load(workdir).transfer(content, style, method=method)
+    check_style_input(style_input)
+    return load(workdir).transfer(content, style, method=method, style_input=style_input)
 
 
 __all__ = ["METHODS", "TGSTModel", "compiled_transfer", "content_floor_contact", "count_params",

@@ -1,7 +1,7 @@
 """Baselines of the comparison in §4.3: AdaIN on latents (eq. 17), Avatar-net-like token swap (eq. 18)
 and the hard swap (eq. 19, :func:`jaxgest.tgst.swap.hard_swap`, re-exported here).
 
-Statistics are per latent channel over time. ``content_valid`` / ``style_valid`` (static ints or (start, stop) ranges) restrict
+Statistics are per latent channel over time. ``content_valid`` / ``style_valid`` (ints or (start, stop) ranges) restrict
 them to the latent frames of the real clip, so the edge padding added to reach a multiple of 16 frames
 does not bias them. The standard deviation is the population one (ddof = 0) so that the AdaIN output has
 exactly the style's mean and std; the authors' code uses ``torch.std`` (ddof = 1).
@@ -30,16 +30,23 @@ _EPS = 1e-6
 def latent_stats(z: jax.Array, valid=None) -> tuple[jax.Array, jax.Array]:
     """Per-channel mean and std over the valid frames: ``(batch, T, d) -> 2 x (batch, 1, d)``.
 
-    valid: None (all frames), an int (the first ``valid`` frames) or a static ``(start, stop)`` range.
+    valid: None (all frames), an int (the first ``valid`` frames) or a ``(start, stop)`` range; static ints
+    slice, traced ones (scalars or ``(batch,)``, e.g. the real length of a clip padded to a length bucket)
+    mask, with the same result.
     """
     chex.assert_rank(z, 3)
     if valid is None:
-        zv = z
-    elif isinstance(valid, tuple):
-        zv = z[:, valid[0]:valid[1]]
-    else:
-        zv = z[:, :valid]
-    return jnp.mean(zv, axis=1, keepdims=True), jnp.std(zv, axis=1, keepdims=True)
+        return jnp.mean(z, axis=1, keepdims=True), jnp.std(z, axis=1, keepdims=True)
+    start, stop = valid if isinstance(valid, tuple) else (0, valid)
+    if isinstance(start, int) and isinstance(stop, int):
+        zv = z[:, start:stop]
+        return jnp.mean(zv, axis=1, keepdims=True), jnp.std(zv, axis=1, keepdims=True)
+    t = jnp.arange(z.shape[1])[None, :]
+    m = (t >= jnp.reshape(jnp.asarray(start), (-1, 1))) & (t < jnp.reshape(jnp.asarray(stop), (-1, 1)))
+    m = m[..., None].astype(z.dtype)
+    n = jnp.maximum(jnp.sum(m, axis=1, keepdims=True), 1.0)
+    mu = jnp.sum(z * m, axis=1, keepdims=True) / n
+    return mu, jnp.sqrt(jnp.sum(jnp.square(z - mu) * m, axis=1, keepdims=True) / n)
 
 
 def adain_latents(content_z: jax.Array, style_z: jax.Array, *, content_valid=None, style_valid=None,
@@ -54,27 +61,32 @@ def adain_latents(content_z: jax.Array, style_z: jax.Array, *, content_valid=Non
     return sd_s * (content_z - mu_c) / (sd_c + eps) + mu_s
 
 
-def cosine_argmax_swap(content_tokens: jax.Array, style_tokens: jax.Array) -> jax.Array:
+def cosine_argmax_swap(content_tokens: jax.Array, style_tokens: jax.Array, style_valid=None) -> jax.Array:
     """Replace each content token by the style token of maximal cosine similarity; ``(batch, Nc, d)``.
 
     Eq. 18 prints ``argmax arccos(.)``, which would pick the *least* similar token; the text ("the most
-    similar style token") and the authors' code use the argmax of the cosine itself, as here.
+    similar style token") and the authors' code use the argmax of the cosine itself, as here. style_valid:
+    optional ``(batch, Ns)`` bool of the real style tokens of a padded set (padded ones are never chosen).
     References: Kuriyama et al. 2022, eq. 18.
     """
     chex.assert_rank([content_tokens, style_tokens], 3)
     unit = lambda t: t / jnp.maximum(jnp.linalg.norm(t, axis=-1, keepdims=True), _EPS)  # noqa: E731
     sim = jnp.einsum("bnd,bmd->bnm", unit(content_tokens), unit(style_tokens))
+    if style_valid is not None:
+        chex.assert_shape(style_valid, style_tokens.shape[:2])
+        sim = jnp.where(style_valid.astype(bool)[:, None, :], sim, -jnp.inf)
     idx = jnp.argmax(sim, axis=-1)
     return jnp.take_along_axis(style_tokens, idx[..., None], axis=1)
 
 
 def avatarnet_swap(content_z: jax.Array, style_z: jax.Array, *, w: int = 4, h: int = 2,
-                   content_valid=None, style_valid=None,
+                   content_valid=None, style_valid=None, style_token_valid=None,
                    eps: float = _EPS) -> jax.Array:
     """Whiten both latents by their own mean/std, swap tokens by cosine argmax, re-colour with the style's.
 
     content_z ``(batch, Tc, d)``, style_z ``(batch, Ts, d)`` -> ``(batch, Tc, d)``; the swapped tokens are
-    merged by the same linear cross-fade as the soft swap. References: Kuriyama et al. 2022, eq. 18;
+    merged by the same linear cross-fade as the soft swap. ``style_token_valid``: optional ``(batch, Ns)`` bool
+    of the real style tokens (:func:`cosine_argmax_swap`). References: Kuriyama et al. 2022, eq. 18;
     Sheng et al. 2018 (Avatar-net's style decorator, here with per-channel whitening as in the authors' code).
     """
     chex.assert_rank([content_z, style_z], 3)
@@ -82,7 +94,7 @@ def avatarnet_swap(content_z: jax.Array, style_z: jax.Array, *, w: int = 4, h: i
     mu_s, sd_s = latent_stats(style_z, style_valid)
     c_white = (content_z - mu_c) / (sd_c + eps)
     s_white = (style_z - mu_s) / (sd_s + eps)
-    swapped = cosine_argmax_swap(tokenize(c_white, w, h), tokenize(s_white, w, h))
+    swapped = cosine_argmax_swap(tokenize(c_white, w, h), tokenize(s_white, w, h), style_token_valid)
     return sd_s * detokenize(swapped, content_z.shape[1], w, h) + mu_s
 
 

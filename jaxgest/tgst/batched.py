@@ -42,22 +42,16 @@ def _num_tokens(frames: int, cfg) -> int:
     return 0 if latent < w else (latent - w) // h + 1
 
 
-def _swap_weights(params, content_upper, style_upper, *, cfg):
-    """Soft-swap weights ``(batch, Nc, Ns)`` of a transfer, row n = content token n from the content's first
-    frame, column m = style token m from the style's first frame (the one call site of the model's API)."""
-    fn = getattr(tgst_model, "swap_weights", None)
-    if fn is not None:
-        return fn(params, content_upper, style_upper, cfg=cfg)
-    return tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method="soft")[2]["swap_weights"]
-
-
-def _pair_outputs(params, content_upper, style_upper, *, cfg, methods: tuple, weights: bool):
-    """Every method's transfer of one (padded) pair, plus the soft-swap weights (None without ``weights``)."""
+def _pair_outputs(params, content_upper, style_upper, content_frames, style_frames, *, cfg, methods: tuple,
+                  weights: bool):
+    """Every method's transfer of one pair padded to its buckets (``*_frames``: the real frames, traced, so
+    one compilation serves a bucket), plus the soft-swap weights (None without ``weights``)."""
+    frames = dict(content_frames=content_frames, style_frames=style_frames)
     outs = {}
     for m in methods:
-        up, lo, _ = tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method=m)
+        up, lo, _ = tgst_model.transfer_arrays(params, content_upper, style_upper, cfg=cfg, method=m, **frames)
         outs[m] = (up, lo)
-    w = _swap_weights(params, content_upper, style_upper, cfg=cfg) if weights else None
+    w = tgst_model.swap_weights(params, content_upper, style_upper, cfg=cfg, **frames) if weights else None
     return outs, w
 
 
@@ -73,17 +67,19 @@ class BatchedTransfer:
     pair, and the outputs are cut back to the content's frames and written on its skeleton
     (:meth:`TGSTModel.to_motion`). Pairs that share a bucket shape share one compilation.
 
-    Padding (``pad_mode``, any ``numpy.pad`` mode): "wrap" (default) continues each clip with its own first
-    frames, so the extra style tokens are copies of real style tokens and both clips' per-channel statistics
-    (AdaIN, Avatar-net whitening) stay close to the real ones; "edge" (held last pose) shrinks the content's
-    std and biased AdaIN's mean style error by -0.013 m/s (3 standard errors) against exact shapes on
-    Bandai-Namco, while "wrap" stays within 1.5 standard errors of exact for every method (README). The
-    padding reaches the real frames only through the transformer's attention (band and CLS), the swap and
-    the baselines' statistics; the padded output frames are cut off.
+    Padding: the clips are padded at the end (``pad_mode``, any ``numpy.pad`` mode; default "edge", the
+    last frame held, as the exact-length transfer pads them) and the padding is masked
+    (:func:`jaxgest.tgst.model.mask_padding`): the swap pool holds exactly the exact-length style tokens
+    (padded tokens get weight 0 and are never attended to), the baselines' statistics use the real latent
+    frames, and the padded output frames are cut off. The padding reaches the real frames only through the
+    autoencoder's convolutions at the clip's end, where "edge" gives the frames the exact-length transfer
+    sees, so the result equals the exact-length one to float error (tests/unit/test_tgst_padding_mask.py).
+    (Before issue 58 the padding was "wrap" and unmasked: 4-13 % of the soft swap's weight landed on the
+    wrapped copies and the seam token of a mirrored style input.)
     """
 
     def __init__(self, model, methods: Sequence[str], *, ratio: float = DEFAULT_BUCKET, diagnostics: bool = True,
-                 pad_mode: str = "wrap"):
+                 pad_mode: str = "edge"):
         self.model, self.methods, self.ratio, self.pad_mode = model, tuple(methods), float(ratio), pad_mode
         self.diagnostics = diagnostics and any(m in ("soft", "hard") for m in self.methods)
         self._arrays: dict = {}
@@ -104,15 +100,16 @@ class BatchedTransfer:
         self.shapes.add((bc, bs))
         c = np.pad(cu, ((0, bc - fc), (0, 0)), mode=self.pad_mode)[None]
         s = np.pad(su, ((0, bs - fs), (0, 0)), mode=self.pad_mode)[None]
-        outs, w = _pair_jit(self.model.params, c, s, cfg=self.model.cfg, methods=self.methods,
-                            weights=self.diagnostics)
+        outs, w = _pair_jit(self.model.params, c, s, np.int32(fc), np.int32(fs), cfg=self.model.cfg,
+                            methods=self.methods, weights=self.diagnostics)
         results = {}
         for m, (up, lo) in outs.items():
             results[m] = self.model.to_motion(np.asarray(up[0, :fc]), np.asarray(lo[0, :fc]),
                                               pair.content.motion)
         diag = None
         if w is not None:
-            nc, ns = _num_tokens(fc, self.model.cfg), _num_tokens(fs, self.model.cfg)
+            cfg = self.model.cfg
+            nc, ns = _num_tokens(fc, cfg), int(tgst_model.exact_token_count(fs, cfg=cfg, role="style"))
             diag = swap_diagnostics(np.asarray(w[0]), nc, ns) if nc and ns else None
         return results, diag
 
@@ -137,8 +134,8 @@ def swap_diagnostics(weights: np.ndarray, num_queries: int | None = None, num_st
 
     Rows are content tokens from the content's first frame, columns style tokens from the style's first
     frame (same model rate, so equal indices are equal times). Only the first ``num_queries`` rows (tokens of
-    the real content) are used; columns past ``num_style`` (padding of the style) stay in the rows as the
-    swap saw them and their total weight is reported as ``padding_mass``. Returns::
+    the real content) are used; columns past ``num_style`` (the swap pool's size) are padding, whose total
+    weight is reported as ``padding_mass`` (0 for :class:`BatchedTransfer`, which masks it). Returns::
 
         {"max_weight": mean over rows of max_m w_nm,
          "effective_tokens": mean over rows of 1 / sum_m w_nm^2 (1 = one token, Ns = uniform),

@@ -50,6 +50,10 @@ AE_LR_SCHEDULES = ("constant", "cosine")
 AE_SAMPLINGS = ("windows", "content")
 POSITION_VELOCITY_JOINTS = ("all", "upper")  # joints of the optional joint-displacement term
 EXPMAP_BRANCHES = ("principal", "rest")  # branch of the training targets' exp-maps (body.nearest_branch)
+#: the style clip a transfer gives the model (``style_input=``, ``--style-input``): ``"mirror"`` (default) the
+#: exemplar followed by its mirror (the input of the experiments' results), ``"as-is"`` the exemplar itself;
+#: built by :func:`jaxgest.tgst.protocol.style_input_clip`
+STYLE_INPUTS = ("mirror", "as-is")
 TRANSFORMER_STYLE_TOKENS = ("window", "clip_and_mirror")  # TransformerTrainConfig.style_tokens
 # InferenceConfig.method (tgst.model.METHODS)
 METHODS = ("soft", "hard", "adain", "avatarnet", "coherent", "autoencoder")

@@ -43,8 +43,10 @@ from jaxgest.tgst.tables import (ERROR_KEYS, STATS, diagnostics_table, markdown_
 
 #: every ``method=`` the model accepts
 METHODS = tgst_model.METHODS
-#: the four methods of the paper's tables (default of :func:`evaluate`)
-TRANSFER_METHODS = getattr(tgst_model, "TRANSFER_METHODS", tuple(m for m in METHODS if m != "autoencoder"))
+#: the four methods of the paper's tables
+TRANSFER_METHODS = tgst_model.TRANSFER_METHODS
+#: the default of :func:`evaluate`: the paper's four and the coherent swap (not in the paper) beside them
+EVALUATE_METHODS = tgst_model.EVALUATE_METHODS
 PAIR_MODES = ("intra", "inter", "all")
 NEUTRAL = ("normal", "neutral")
 CONTROLS = ("content_as_is", "style_as_is")
@@ -245,7 +247,8 @@ def evaluate(
     Loads the model of ``workdir`` (``jaxgest.tgst.api.load_model``; or uses ``model``: a TGSTModel, or any
     object with ``.transfer(content, style, method=...) -> Motion``, transferred pair by pair), builds
     :func:`make_pairs` of ``data_dir`` (``contents`` restricts the content clips; ``max_pairs`` None or 0 =
-    all pairs), transfers every pair with every method (default the paper's four) and returns::
+    all pairs), transfers every pair with every method (default :data:`EVALUATE_METHODS`: the paper's four and
+    the coherent swap) and returns::
 
         {"workdir", "data", "pairs", "num_pairs", "protocol": {...}, "bucket",
          "methods": {m: {"content", "style", "gt_content", "gt_style", "num_gt", "num_evaluated",
@@ -269,7 +272,7 @@ def evaluate(
 
     wall0, cpu0 = time.perf_counter(), time.process_time()
     proto = get_protocol(protocol, trim_seconds)
-    methods = TRANSFER_METHODS if methods is None else tuple(methods)
+    methods = EVALUATE_METHODS if methods is None else tuple(methods)
     if not methods:
         raise DataError("evaluate: no methods given")
     unknown = [m for m in methods if m not in METHODS]
@@ -428,6 +431,7 @@ def metric_validity(
 __all__ = [
     "METHODS",
     "PROTOCOLS",
+    "EVALUATE_METHODS",
     "TRANSFER_METHODS",
     "BatchedTransfer",
     "Pair",

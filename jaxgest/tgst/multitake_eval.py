@@ -172,14 +172,15 @@ def fit_pca(model, clips, components: int = 16):
 
 
 def _exemplar_input(exemplar, variant: str, protocol):
-    """The style clip the model is given: the exemplar as is, or the exemplar + its mirror (the protocol's
-    style reference: rig T-pose mirror, 0.5 s blend)."""
+    """The style clip the model is given (:data:`VARIANTS`): the exemplar as is, or the exemplar + its mirror;
+    :func:`jaxgest.tgst.protocol.style_input_clip`, the function of every user transfer."""
     from jaxgest.motion.datasets import Clip
-    from jaxgest.tgst.protocol import style_reference
+    from jaxgest.tgst.protocol import style_input_clip
 
     if variant == "as_is":
         return exemplar
-    return Clip(style_reference(exemplar.motion, protocol), exemplar.content, exemplar.style, exemplar.path)
+    return Clip(style_input_clip(exemplar.motion, "mirror", protocol), exemplar.content, exemplar.style,
+                exemplar.path)
 
 
 @dataclasses.dataclass(frozen=True)

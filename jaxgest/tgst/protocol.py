@@ -17,8 +17,9 @@ The ``authors`` protocol (the authors' evaluator.py and dataset/mocap.py; docs/d
 * velocities as the F - 1 forward differences x fps;
 * every clip a transfer is compared with for *style* (the style clip; the ground truth in the gt and Table 1
   columns) is that clip followed by its mirror image (:func:`jaxgest.motion.kinematics.mirror`), blended over
-  0.5 s (their 30 frames at 60 fps, ``append(..., transit=True, period=30)``). As in their evaluator the model
-  itself is given the style clip as is (their ``one_batch_tensor`` is packed before the mirror is appended).
+  0.5 s (their 30 frames at 60 fps, ``append(..., transit=True, period=30)``). What the model itself is given
+  is :func:`style_input_clip`: by default the same clip + mirror (the input of the experiments' results), or
+  the style clip as is (``style_input="as-is"``).
 * joints: both hands for the content error (their effector indices 7, 11 = LHand, RHand of their 13-joint
   upper body), the 8 arm joints (shoulder, upper arm, forearm, hand x L, R; their indices 4-11) for the
   style error; the 21-joint body's Hand_L/R and body.ARMS here, through the rig's joint map.
@@ -50,6 +51,7 @@ from jaxgest import metrics
 from jaxgest.runtime.errors import DataError
 from jaxgest.motion import body, kinematics
 from jaxgest.motion.skeleton import Motion
+from jaxgest.tgst.config import STYLE_INPUTS  # noqa: F401  (re-exported: the style inputs of a transfer)
 
 CM_TO_M = 0.01
 
@@ -161,6 +163,38 @@ def style_reference(motion: Motion, protocol="authors") -> Motion:
     if not p.mirror_style:
         return motion
     return kinematics.append_motion(motion, mirror_motion(motion), p.transition_frames(motion.fps))
+
+
+
+
+def check_style_input(style_input: str) -> None:
+    """DataError unless ``style_input`` is one of :data:`STYLE_INPUTS`."""
+    if style_input not in STYLE_INPUTS:
+        raise DataError(f"unknown style input {style_input!r} (choose from {', '.join(STYLE_INPUTS)})")
+
+
+def style_input_clip(motion: Motion, style_input: str = "mirror", protocol="authors") -> Motion:
+    """The style clip the model is given for the exemplar ``motion``: followed by its mirror (0.5 s blend,
+    :func:`style_reference`) for ``"mirror"``, ``motion`` itself for ``"as-is"`` (:data:`STYLE_INPUTS`).
+
+    The one function behind every transfer's style input: :meth:`jaxgest.tgst.api.TGSTModel.transfer` (the
+    CLI, the pipeline, the demo) and the multi-take evaluation (:mod:`jaxgest.tgst.multitake_eval`, the
+    experiments). The mirrored clip keeps the exemplar's name, so errors name its file. Raises DataError for
+    an unknown ``style_input`` or a rig the mirror cannot handle.
+    References: Kuriyama et al. 2022, §4.1 ("style gesture is augmented by computing mirror symmetry").
+    """
+    check_style_input(style_input)
+    if style_input == "as-is":
+        return motion
+    p = get_protocol(protocol)
+    if not p.mirror_style:  # the mirror input is the authors' protocol's reference, whichever protocol scores
+        p = PROTOCOLS["authors"]
+    try:
+        mirrored = style_reference(motion, p)
+    except (KeyError, ValueError, DataError) as e:
+        raise DataError(f"{motion.name or 'style'}: cannot mirror the style clip ({e}); "
+                        "--style-input as-is gives it as is") from None
+    return mirrored.replace(name=motion.name)
 
 
 def clip_features(motion: Motion, fps: float | None = None, protocol="authors",

@@ -62,7 +62,10 @@ def soft_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array,
     References: Kuriyama et al. 2022, eq. 4.
     """
     logits = swap_logits(decoded_content, encoded_style, similarity, style_valid)
-    return jax.nn.softmax(logits / temperature, axis=-1)
+    weights = jax.nn.softmax(logits / temperature, axis=-1)
+    if style_valid is not None:  # exp(-1e9) already underflows to 0; this keeps it exact at any temperature
+        weights = jnp.where(style_valid.astype(bool)[:, None, :], weights, 0.0)
+    return weights
 
 
 def hard_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, similarity: str = "dot",
@@ -79,40 +82,68 @@ def hard_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, simi
 COHERENT_RATES = tuple(round(0.5 + 0.05 * i, 2) for i in range(31))
 
 
-def constant_rate_path(scores: jax.Array, rates=COHERENT_RATES) -> jax.Array:
+def constant_rate_path(scores: jax.Array, rates=COHERENT_RATES, valid=None, query_valid=None) -> jax.Array:
     """The style-token indices ``(batch, Nc)`` of the constant-rate path with the highest mean score.
 
     scores ``(batch, Nc, Ns)``: how well style token m fits content token n (e.g. log swap weights). Paths
     ``idx_n = min(round(s + r n), Ns - 1)`` for every rate r in ``rates`` and start s in 0 .. Ns - 1; a path
     may overrun the style's end by one token at most (it then holds the last token) unless no path fits, when
-    every path counts. Ties go to the first (rate, start) in that order. Not in the paper: a time-coherent
-    choice of the tokens eq. 4 blends. References: Kuriyama et al. 2022, eq. 4 (the scores); eq. 1 (tokens).
+    every path counts. Ties go to the first (rate, start) in that order. valid: optional ``(batch, Ns)`` bool,
+    the real style tokens of a padded set, which must come first: Ns is then their number per row, so the
+    paths, their ends and the ties are those of the unpadded set and no path touches a padded token.
+    query_valid: optional ``(batch, Nc)`` bool, the real content tokens (first): only they are scored and the
+    path ends at the last of them (padded content tokens continue the path; their output is cut off).
+    Not in the paper: a time-coherent choice of the tokens eq. 4 blends.
+    References: Kuriyama et al. 2022, eq. 4 (the scores); eq. 1 (tokens).
     """
     chex.assert_rank(scores, 3)
-    _, nc, ns = scores.shape
+    b, nc, ns = scores.shape
+    if valid is None:
+        n_real = jnp.full((b,), ns, jnp.int32)
+    else:
+        chex.assert_shape(valid, (b, ns))
+        n_real = jnp.maximum(jnp.sum(valid.astype(jnp.int32), axis=-1), 1)
     r = jnp.asarray(rates, jnp.float32)[:, None, None]
     starts = jnp.arange(ns, dtype=jnp.float32)[None, :, None]
     steps = jnp.arange(nc, dtype=jnp.float32)[None, None, :]
     raw = jnp.round(starts + r * steps).astype(jnp.int32)  # (R, S, Nc)
-    idx = jnp.minimum(raw, ns - 1)
-    rows = jnp.broadcast_to(jnp.arange(nc)[None, None, :], idx.shape)
-    mean = jnp.mean(scores[:, rows, idx], axis=-1)  # (batch, R, S)
-    fits = (raw[..., -1] <= ns)[None]
-    mean = jnp.where(jnp.any(fits), jnp.where(fits, mean, -jnp.inf), mean)
-    best = jnp.argmax(mean.reshape(mean.shape[0], -1), axis=-1)
-    return idx.reshape(-1, nc)[best]
+    idx = jnp.minimum(raw[None], n_real[:, None, None, None] - 1)  # (batch, R, S, Nc)
+    picked = jnp.take_along_axis(scores[:, None, None], idx[..., None], axis=-1)[..., 0]
+    if query_valid is None:
+        mean = jnp.mean(picked, axis=-1)  # (batch, R, S)
+        last = jnp.broadcast_to(raw[None, ..., -1], mean.shape)
+    else:
+        chex.assert_shape(query_valid, (b, nc))
+        q = query_valid.astype(scores.dtype)[:, None, None, :]
+        rows = jnp.maximum(jnp.sum(query_valid.astype(jnp.int32), axis=-1), 1)  # (batch,)
+        mean = jnp.sum(picked * q, axis=-1) / rows[:, None, None].astype(scores.dtype)
+        last = jnp.take_along_axis(jnp.broadcast_to(raw[None], (b,) + raw.shape),
+                                   jnp.broadcast_to((rows - 1)[:, None, None, None], (b,) + raw.shape[:2] + (1,)),
+                                   axis=-1)[..., 0]
+    started = (jnp.arange(ns)[None, None, :] < n_real[:, None, None])  # starts inside the real tokens
+    fits = (last <= n_real[:, None, None]) & started
+    any_fits = jnp.any(fits, axis=(1, 2), keepdims=True)
+    mean = jnp.where(started, mean, -jnp.inf)
+    mean = jnp.where(any_fits, jnp.where(fits, mean, -jnp.inf), mean)
+    best = jnp.argmax(mean.reshape(b, -1), axis=-1)
+    return idx.reshape(b, -1, nc)[jnp.arange(b), best]
 
 
 def coherent_swap_weights(decoded_content: jax.Array, encoded_style: jax.Array, temperature: float = 1.0,
-                          similarity: str = "dot", style_valid=None, rates=COHERENT_RATES) -> jax.Array:
+                          similarity: str = "dot", style_valid=None, rates=COHERENT_RATES,
+                          content_valid=None) -> jax.Array:
     """One-hot weights ``(batch, Nc, Ns)`` on the :func:`constant_rate_path` of the log soft-swap weights.
 
     The similarities and softmax of eq. 4 (``temperature``, ``similarity``, ``style_valid`` as in
-    :func:`soft_swap_weights`); each content token takes the one style token on the path. Not in the paper.
+    :func:`soft_swap_weights`); each content token takes the one style token on the path, which never touches
+    a padded token (``style_valid``: real tokens first; ``content_valid``: the real content tokens, the only
+    ones scored). Not in the paper.
     References: Kuriyama et al. 2022, eq. 4.
     """
     logits = swap_logits(decoded_content, encoded_style, similarity, style_valid)
-    path = constant_rate_path(jax.nn.log_softmax(logits / temperature, axis=-1), rates)
+    path = constant_rate_path(jax.nn.log_softmax(logits / temperature, axis=-1), rates,
+                              None if style_valid is None else style_valid.astype(bool),
+                              None if content_valid is None else content_valid.astype(bool))
     return jax.nn.one_hot(path, logits.shape[-1], dtype=logits.dtype)
 
 

@@ -123,6 +123,30 @@ def pytest_configure(config):
         _warm_numba_cache()
 
 
+#: tests/slow.txt names its tests relative to the repository root (REPO)
+SLOW_LIST = REPO / "tests" / "slow.txt"
+
+
+def slow_entries() -> tuple[set, set]:
+    """``(files, (file, function) pairs)`` of tests/slow.txt: the tests marked ``slow`` besides those that
+    carry the marker themselves (left out of the README's test command, run by .ci/run after it)."""
+    files, functions = set(), set()
+    for line in SLOW_LIST.read_text().splitlines():
+        entry = line.split("#", 1)[0].strip()
+        if entry:
+            path, _, function = entry.partition("::")
+            (functions.add((path, function)) if function else files.add(path))
+    return files, functions
+
+
+def is_listed_slow(item, entries) -> bool:
+    """Whether tests/slow.txt (``entries``: :func:`slow_entries`) names the test ``item`` (by file or function)."""
+    files, functions = entries
+    path = item.path.relative_to(REPO).as_posix()
+    function = getattr(item, "originalname", None) or item.name.split("[")[0]
+    return path in files or (path, function) in functions
+
+
 def _scale_examples(function, factor: int) -> None:
     """Multiply a hypothesis test's own ``max_examples`` (its settings live on the wrapped function)."""
     own = getattr(function, "_hypothesis_internal_use_settings", None)
@@ -140,6 +164,10 @@ def pytest_collection_modifyitems(config, items):
             if thorough and id(function) not in scaled:  # parametrized tests share one function
                 scaled.add(id(function))
                 _scale_examples(function, THOROUGH_FACTOR)
+    entries = slow_entries()
+    for item in items:
+        if is_listed_slow(item, entries):
+            item.add_marker(pytest.mark.slow)
     rank = {name: i for i, name in enumerate(COSTLIEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the others keep their order
 

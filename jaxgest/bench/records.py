@@ -6,6 +6,8 @@ writing it.
 
 from __future__ import annotations
 
+from jaxgest.runtime.provenance import STAMP_KEYS
+
 # The docs/design.md §8 record (key -> allowed JSON types), and the extra fields the harness adds.
 RECORD_FIELDS: dict[str, tuple] = {
     "case": (str,),
@@ -86,3 +88,12 @@ def validate_document(doc: dict) -> None:
     for key in ("cpu", "cores", "jax", "jaxlib", "xla_flags"):
         if key not in doc["machine"]:
             raise ValueError(f"document machine info misses {key!r}")
+    # ``stamp`` (jaxgest.runtime.provenance.stamp: commit, dirty, version, the cases and settings run as its
+    # config, the command); the machine (CPU, XLA flags, threads) is ``machine``. Files written before the
+    # stamp existed have none.
+    if "stamp" in doc:
+        if not isinstance(doc["stamp"], dict):
+            raise ValueError(f"document field 'stamp' is {type(doc['stamp']).__name__}, expected dict")
+        for key in STAMP_KEYS:
+            if key not in doc["stamp"]:
+                raise ValueError(f"document stamp misses {key!r}")

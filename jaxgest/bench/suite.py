@@ -20,6 +20,7 @@ from jaxgest.bench import harness, machine, report
 from jaxgest.bench.cases import all_cases
 from jaxgest.bench.options import add_arguments
 from jaxgest.bench.records import validate_document
+from jaxgest.runtime import provenance
 from jaxgest.runtime.errors import JaxgestError
 from jaxgest.runtime.io import check_output_path, write_text_atomic
 
@@ -87,7 +88,9 @@ def run(args) -> tuple[dict, int]:
               + ", ".join(f"{k} {v['rms_pct_of_range']:.3f} %" for k, v in acc.items() if isinstance(v, dict)),
               flush=True)
     info["load_avg_1m_end"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-    doc = {"machine": info, "quick": bool(args.quick), "wall_s": time.perf_counter() - t0,
+    run = {"cases": [c.name for c in cases], "quick": bool(args.quick), "repeats": repeats, "budget_s": budget}
+    doc = {"stamp": provenance.stamp(run), "machine": info, "quick": bool(args.quick),
+           "wall_s": time.perf_counter() - t0,
            "ratios": report.ratios(records), "peer_ratios": report.peer_ratios(records),
            "peer_compile_ratios": report.peer_compile_ratios(records),
            "failures": failures, "records": records, **extras}

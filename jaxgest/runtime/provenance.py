@@ -21,10 +21,11 @@ from jaxgest.runtime.errors import DataError
 from jaxgest.runtime.io import write_json_atomic
 
 STAMP_KEYS = ("commit", "dirty", "version", "config", "command")
-#: where experiments keep their stamped results and the READMEs whose tables the driver rewrites from them
+#: where experiments and benchmarks keep their stamped results and the READMEs whose tables the driver rewrites from them
 #: (git pathspec globs from the checkout's top): not code, so a rewritten results file or README table (by this
 #: run or one beside it) does not make a stamp dirty
-RESULTS_PATHS = ("experiments/*/out/**", "experiments/*/results/**", "experiments/*/README.md")
+RESULTS_PATHS = ("experiments/*/out/**", "experiments/*/results/**", "experiments/*/README.md",
+                 "benchmarks/results/**")
 
 
 def _git(args, cwd) -> str | None:

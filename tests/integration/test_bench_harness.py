@@ -249,6 +249,13 @@ def test_python_m_benchmarks_writes_valid_json_and_table(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(out.read_text())
     harness.validate_document(doc)
+    st = doc["stamp"]  # the provenance stamp: the commit of this checkout, the cases and settings, the command
+    assert st["commit"] == subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True,
+                                          text=True).stdout.strip() or st["commit"] is None
+    assert st["config"] == {"cases": [CLI_CASE], "quick": True, "repeats": 2, "budget_s": st["config"]["budget_s"]}
+    assert "--json" in st["command"] and st["version"]
+    with pytest.raises(ValueError, match="stamp misses 'commit'"):
+        harness.validate_document({**doc, "stamp": {k: v for k, v in st.items() if k != "commit"}})
     assert [(x["case"], x["impl"]) for x in doc["records"]] == [(CLI_CASE, i) for i in ("jit", "eager", "numpy")]
     assert doc["machine"]["cores"] >= 1 and doc["quick"] is True and doc["failures"] == []
     assert doc["machine"]["probe"]["gemm_gflops"] > 0 and doc["machine"]["probe"]["mem_gbps"] > 0

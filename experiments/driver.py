@@ -5,6 +5,7 @@
     python -m experiments run CONFIG... --seeds 0 1   only those seeds, one results file each: <config>.s0.json ...
     python -m experiments merge CONFIG... [--quick]   every seed file of a config -> its whole results file
     python -m experiments table NAME [--quick]         rewrite the README tables NAME from their results files
+                                                     (``claims``: the root README's claims table)
     python -m experiments table --check                 exit 1 when a README table differs from its results
     python -m experiments list                         configs and tables
 
@@ -395,7 +396,7 @@ def main(argv=None) -> int:
     if a.cmd == "list":
         for c in sorted(ROOT.glob("*/configs/*.toml")):
             print(c.relative_to(REPO))
-        for name in tables.TABLES:
+        for name in [*tables.TABLES, tables.CLAIMS]:
             print("table", name)
         return 0
     try:
@@ -407,7 +408,9 @@ def main(argv=None) -> int:
 
 def _tables(a, tables) -> int:
     if a.check:
-        bad = tables.check()
+        from experiments import claims
+
+        bad = tables.check() + claims.check()
         for line in bad:
             print(line, file=sys.stderr)
         return 1 if bad else 0

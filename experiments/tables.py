@@ -233,6 +233,7 @@ TABLES = {
                                       partial=True),
 }
 
+CLAIMS = "claims"  # the root README's claims table (experiments/claims.py), not a TABLES entry
 MARKER = re.compile(r"<!-- table:(?P<name>[\w.]+)(?P<quick>:quick)? -->\n.*?<!-- /table -->", re.S)
 
 
@@ -333,7 +334,8 @@ def _readmes() -> list[pathlib.Path]:
 
 
 def check() -> list[str]:
-    """One line per README table that differs from its results files (or whose results are missing)."""
+    """One line per README table that differs from its results files (or whose results are missing); the root
+    README's claims table: :func:`experiments.claims.check`."""
     bad = []
     for readme in _readmes():
         if not readme.is_file():
@@ -353,8 +355,14 @@ def check() -> list[str]:
 
 
 def update(names, quick: bool = False) -> int:
-    names = names or list(TABLES)
+    """Rewrite the named README tables (default: all; ``claims``: the root README's claims table)."""
+    names = names or [*TABLES, *([] if quick else [CLAIMS])]
     for name in names:
+        if name == CLAIMS and not quick:
+            from experiments import claims
+
+            claims.update()
+            continue
         if name not in TABLES:
             raise DriverError(f"unknown table {name} (python -m experiments list)")
         new = block(name, quick)

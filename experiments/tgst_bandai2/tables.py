@@ -82,7 +82,9 @@ def holds(res, sign):
     ok = sign * m > 2 * se and all(sign * x > 0 for x in per)
     if len(per) < 3:
         return f"({'> 2 SE' if sign * m > 2 * se else '< 2 SE'}; {len(per)} seed)"
-    return "**holds**" if ok else "does not hold"
+    if ok:
+        return "**holds**"
+    return "same sign, not significant" if sign * m > 0 else "does not hold"  # docs/design.md §11
 
 
 def fmt_rel(res):

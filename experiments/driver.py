@@ -325,7 +325,8 @@ def run_one(cfg: dict, quick: bool, seed: int | None, once: bool = True) -> path
                + (["--seeds", str(seed)] if seed is not None else []))
     dest = results_path(cfg, seed)
     dest.parent.mkdir(parents=True, exist_ok=True)
-    dest = write_results(dest, results, cfg, shlex.join(command))
+    dest = write_results(dest, results, cfg, shlex.join(command),  # with the first seed's training code
+                         workdir=first.parent if first.is_file() else None)
     log(f"wrote {dest.relative_to(REPO)}")
     return dest
 

@@ -85,7 +85,8 @@ def main() -> int:
     except DataError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    write_results(HERE / "results" / f"eval_{cfg['name']}.json", _round(report), cfg)
+    write_results(HERE / "results" / f"eval_{cfg['name']}.json", _round(report), cfg,
+                  workdir=HERE / "out" / "runs" / cfg["name"])  # the stamp holds the training's code too
     print(f"{cfg['name']}: {len(pairs)} pairs in {report['wall_s']:.0f} s", flush=True)
     return 0
 

@@ -15,6 +15,8 @@ from typing import Optional
 import jax
 import numpy as np
 
+from jaxgest.runtime import provenance
+
 
 def probe_machine(seconds: float = 1.0, *, gemm_n: int = 1024, stream_mb: int = 128) -> dict:
     """Peak float32 GEMM rate and memory read bandwidth of the moment, ~``seconds`` in total (XLA, all cores).
@@ -66,15 +68,7 @@ def floor(flops: float, nbytes: float, seconds: float, probe: dict) -> dict:
 def machine_info(probe: Optional[dict] = None) -> dict:
     """CPU model, core count, versions and XLA flags: the context a number needs (``probe``: this run's
     :func:`probe_machine`)."""
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
+    cpu = provenance.cpu_model()
     import jaxlib
 
     try:

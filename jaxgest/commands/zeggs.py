@@ -287,6 +287,6 @@ def _evaluate_claims(args, out) -> int:
     result, config = claims_run.run(args.workdir, args.data, heldout=args.heldout, heldout_seeds=args.heldout_seeds,
                                 speech=args.speech, speech_styles=styles, segment_s=args.segment_seconds,
                                 seed=args.seed, substitute=args.substitute, style_scale=args.style_scale)
-    write_results(out, result, config)
+    write_results(out, result, config, workdir=args.workdir)
     print(claims_run.markdown(result))
     return 0

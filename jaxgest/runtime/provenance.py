@@ -10,7 +10,9 @@ References: docs/design.md (results and provenance).
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
 import pathlib
 import platform
 import shlex
@@ -34,6 +36,37 @@ def _git(args, cwd) -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() if out.returncode == 0 else None
+
+
+#: the environment variables that set threads (XLA's flags, the BLAS pools): the same seed can train other
+#: parameters under other threading (another reduction order), so a stamp records them
+THREAD_ENV = ("XLA_FLAGS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``; ``platform.processor()`` elsewhere)."""
+    cpu = platform.processor() or ""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return cpu
+
+
+def dirty_paths(path=None, limit: int = 50) -> list[str] | None:
+    """The tracked files (not results, :data:`RESULTS_PATHS`) that differ from the commit, at most ``limit``
+    (then a last entry ``"... and N more"``); None outside a checkout."""
+    where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
+    where = where if where.is_dir() else where.parent
+    status = _git(["status", "--porcelain", "--untracked-files=no", "--", ":(top)",
+                   *(f":(top,glob,exclude){p}" for p in RESULTS_PATHS)], where)
+    if status is None:
+        return None
+    paths = [line.split(None, 1)[1] for line in status.splitlines() if line.strip()]  # "XY path"
+    return paths[:limit] + ([f"... and {len(paths) - limit} more"] if len(paths) > limit else [])
 
 
 def commit_of(path=None) -> tuple[str | None, bool | None]:
@@ -77,9 +110,20 @@ def process_command(argv=None, root=None) -> list[str]:
     return first + [rel(a) for a in argv[1:]]
 
 
-def stamp(config: dict, command: str | list | None = None, repo=None) -> dict:
-    """The stamp of a result: commit (and whether the tree had uncommitted changes), package version,
-    the resolved config (as given: a JSON-able dict) and the command (default: this process's argv)."""
+def diff_sha256(path=None) -> str | None:
+    """SHA-256 of the uncommitted changes to tracked files (``git diff HEAD``, results excluded as in
+    :func:`commit_of`): two dirty trees with the same commit and hash ran the same code. None outside a checkout."""
+    where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
+    where = where if where.is_dir() else where.parent
+    diff = _git(["diff", "HEAD", "--", ":(top)", *(f":(top,glob,exclude){p}" for p in RESULTS_PATHS)], where)
+    return None if diff is None else hashlib.sha256(diff.encode()).hexdigest()
+
+
+def code_stamp(command: str | list | None = None, repo=None) -> dict:
+    """What ran: commit (and whether the tree had uncommitted changes: then which files, ``dirty_paths``, and
+    their diff's hash, ``diff_sha256``), package version, the command (default: this process's argv), and the
+    machine: CPU model, cores and the thread settings (:data:`THREAD_ENV`). Trainings write it into their
+    workdir's config.json (``"code"``); :func:`stamp` holds it too."""
     from jaxgest._version import __version__
     import jax
 
@@ -91,18 +135,42 @@ def stamp(config: dict, command: str | list | None = None, repo=None) -> dict:
     return {
         "commit": commit,
         "dirty": dirty,
+        **({"dirty_paths": dirty_paths(repo), "diff_sha256": diff_sha256(repo)} if dirty else {}),
         "version": __version__,
-        "config": json.loads(json.dumps(config, default=str)),
         "command": command,
         "python": platform.python_version(),
         "jax": jax.__version__,
         "machine": platform.machine(),
+        "cpu": cpu_model(),
+        "cores": os.cpu_count(),
+        "threads": {k: os.environ[k] for k in THREAD_ENV if k in os.environ},
     }
 
 
-def write_results(path, results: dict, config: dict, command=None) -> pathlib.Path:
-    """Write ``{"stamp": stamp(config, command), "results": results}`` to ``path`` atomically."""
-    return write_json_atomic(path, {"stamp": stamp(config, command, repo=pathlib.Path(path).resolve().parent),
+def training_code(workdir) -> dict | None:
+    """The ``"code"`` stamp a training wrote into ``workdir/config.json`` (None for a workdir from before it,
+    or none at all)."""
+    try:
+        code = json.loads((pathlib.Path(workdir) / "config.json").read_text()).get("code")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return code if isinstance(code, dict) else None
+
+
+def stamp(config: dict, command: str | list | None = None, repo=None, workdir=None) -> dict:
+    """The stamp of a result: :func:`code_stamp` and the resolved config (as given: a JSON-able dict); with
+    ``workdir`` (the trained model evaluated) also ``"training"``, the code stamp its training wrote."""
+    out = code_stamp(command, repo)
+    out["config"] = json.loads(json.dumps(config, default=str))
+    if workdir is not None:
+        out["training"] = training_code(workdir)
+    return out
+
+
+def write_results(path, results: dict, config: dict, command=None, workdir=None) -> pathlib.Path:
+    """Write ``{"stamp": stamp(config, command, workdir=workdir), "results": results}`` to ``path`` atomically."""
+    return write_json_atomic(path, {"stamp": stamp(config, command, repo=pathlib.Path(path).resolve().parent,
+                                                   workdir=workdir),
                                     "results": results})
 
 

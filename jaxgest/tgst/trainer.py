@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxgest.runtime import parallel, training
+from jaxgest.runtime import parallel, provenance, training
 from jaxgest.runtime.workdir_lock import exclusive_workdir
 from jaxgest.runtime.training import bare_state, jit_config_step
 from jaxgest.runtime.config import apply_overrides as override_config
@@ -208,7 +208,7 @@ def train(data_dir, workdir, *, preset: str = "tiny", ae_steps: Optional[int] = 
         config_json = {"model": MODEL, "format_version": training.FORMAT_VERSION, "preset": preset,
                        "config": cfg.to_dict(), "data": str(pathlib.Path(data_dir)),
                        "data_summary": tdata.describe(body_data, cfg), "seed": int(seed), **info,
-                       "skeleton": tdata.BODY_SIGNATURE}
+                       "skeleton": tdata.BODY_SIGNATURE, "code": provenance.code_stamp()}
         if jax.process_index() == 0:
             training.write_json_atomic(workdir / "config.json", config_json)
 

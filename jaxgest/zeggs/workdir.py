@@ -25,6 +25,7 @@ from typing import Any, Mapping, Optional
 import jax
 import numpy as np
 
+from jaxgest.runtime import provenance
 from jaxgest.runtime.errors import CheckpointError
 from jaxgest.motion import bvh
 from jaxgest.motion.datasets import NormStats
@@ -84,7 +85,7 @@ def write_config(workdir, cfg: Config, *, preset: str, steps: int, seed: int, da
     write_json_atomic(pathlib.Path(workdir) / CONFIG, {
         "model": KIND, "format_version": FORMAT_VERSION, "preset": preset, "config": cfg.to_dict(),
         "steps": steps, "seed": seed, "data": str(data), "skeleton": skeleton.signature(),
-        "num_joints": skeleton.num_joints, **info})
+        "num_joints": skeleton.num_joints, **info, "code": provenance.code_stamp()})
 
 
 def read_config(workdir) -> tuple[Config, dict]:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from jaxgest import cli
+from jaxgest.runtime import provenance
 from jaxgest.runtime.errors import CheckpointError, DataError, JaxgestError
 from jaxgest.motion import bvh, datasets, kinematics, root_motion
 from tiny_models import train_tgst
@@ -39,6 +40,9 @@ def test_train_writes_config_metrics_checkpoints(trained):
     cfg = json.loads((work / "config.json").read_text())
     assert cfg["model"] == "tgst" and cfg["preset"] == "tiny" and cfg["devices"] == 1
     assert set(cfg["config"]) == {"name", "model", "train", "inference"}
+    # the code that trained it (issue 59): what provenance.code_stamp gives this checkout, and the machine
+    assert cfg["code"]["commit"] == provenance.commit_of()[0] and cfg["code"]["version"]
+    assert {"cpu", "cores", "threads", "command"} <= set(cfg["code"])
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
     stages = [(r["stage"], r["step"]) for r in lines]
     assert stages == [("autoencoder", s) for s in (1, 2, 3, 4)] + [("transformer", s) for s in (1, 2, 3, 4)]

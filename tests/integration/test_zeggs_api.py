@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
+from jaxgest.runtime import provenance
 from jaxgest.runtime.errors import CheckpointError, JaxgestError
 from jaxgest.motion import bvh
 from tiny_models import train_zeggs
@@ -56,6 +57,8 @@ def test_training_writes_everything_and_resumes(trained, copy_workdir):
     data, work, summary = trained
     for name in ("config.json", "metrics.jsonl", "pose_stats.json", "speech_stats.json", "reference.bvh"):
         assert (work / name).is_file(), name
+    code = json.loads((work / "config.json").read_text())["code"]  # the code that trained it (issue 59)
+    assert code["commit"] == provenance.commit_of()[0] and {"version", "cpu", "threads", "command"} <= set(code)
     lines = [json.loads(x) for x in (work / "metrics.jsonl").read_text().splitlines()]
     assert [r["step"] for r in lines] == [1, 2, 3, 4] and all(np.isfinite(r["loss"]) for r in lines)
     assert lines[0]["devices"] == 1 and summary["start_step"] == 0 and summary["steps"] == 4

@@ -5,12 +5,12 @@ jax.profiler trace) and ``jaxgest plot``; the flags' one-line errors. On the ses
 from __future__ import annotations
 
 import json
-import struct
 
 import numpy as np
 import pytest
 
 from jaxgest import cli
+from tb_events import scalar_events
 
 
 @pytest.fixture(scope="module")
@@ -32,18 +32,7 @@ def _lines(workdir):
 
 def _scalars(folder):
     """{(run, tag, step): value} of the TensorBoard event files under ``folder``."""
-    from tensorboardX.proto import event_pb2
-
-    out = {}
-    for path in sorted(folder.rglob("events.out.tfevents.*")):
-        data, pos = path.read_bytes(), 0
-        while pos < len(data):
-            (n,) = struct.unpack("<Q", data[pos:pos + 8])
-            event = event_pb2.Event.FromString(data[pos + 12:pos + 12 + n])
-            pos += 12 + n + 4
-            for v in event.summary.value:
-                out[(path.parent.name, v.tag, event.step)] = v.simple_value
-    return out
+    return {(run, tag, step): value for run, tag, step, value in scalar_events(folder)}
 
 
 @pytest.mark.slow

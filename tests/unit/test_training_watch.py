@@ -5,7 +5,6 @@ the profiler window. A toy step whose metric is its own step index, so every mea
 from __future__ import annotations
 
 import json
-import struct
 
 import jax
 import jax.numpy as jnp
@@ -14,6 +13,7 @@ import pytest
 
 from jaxgest.runtime.errors import TrainingError
 from jaxgest.runtime.training import MetricsLogger, TrainState, train_loop
+from tb_events import scalar_events
 
 
 def _counting_state():
@@ -87,30 +87,13 @@ def test_non_finite_step_inside_an_interval_stops_at_its_log_step(tmp_path, key)
     assert not (tmp_path / "metrics.jsonl").exists() or _lines(tmp_path) == []
 
 
-def _events(folder):
-    """(tag, step, value) of every scalar in the TensorBoard event files under ``folder`` (TFRecord framing:
-    length u64, its crc u32, the Event proto, its crc u32)."""
-    from tensorboardX.proto import event_pb2
-
-    out = []
-    for path in sorted(folder.rglob("events.out.tfevents.*")):
-        data, pos = path.read_bytes(), 0
-        while pos < len(data):
-            (n,) = struct.unpack("<Q", data[pos:pos + 8])
-            event = event_pb2.Event.FromString(data[pos + 12:pos + 12 + n])
-            pos += 12 + n + 4
-            for v in event.summary.value:
-                out.append((path.parent.name, v.tag, event.step, v.simple_value))
-    return out
-
-
 def test_tensorboard_writer_behind_log(tmp_path, key):
     pytest.importorskip("tensorboardX")
     logger = MetricsLogger(tmp_path, extra={"stage": "toy", "devices": 1}, tb_dir=tmp_path / "tb")
     train_loop(_counting_state(), _counting_step, _batch, key=key, num_steps=4, logger=logger, log_every=2,
                eval_every=4, eval_fn=lambda s: {"index": jnp.float32(-1.0)}, progress=False)
     logger.close()
-    got = {(run, tag, step): value for run, tag, step, value in _events(tmp_path / "tb")}
+    got = {(run, tag, step): value for run, tag, step, value in scalar_events(tmp_path / "tb")}
     # the same numbers as metrics.jsonl: training ones in train/, held-out ones in eval/ under the same tag
     for r in _lines(tmp_path):
         assert got[("train", "toy/index", r["step"])] == r["index"]

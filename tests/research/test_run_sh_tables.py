@@ -62,6 +62,10 @@ def test_verdict_rule_decides_only_when_the_remaining_runs_cannot_change_it():
     assert verdict(1, 2).startswith("open") and verdict(0, 1).startswith("open") and verdict(3, 4).startswith("open")
     assert verdict(0, 1, 2, 2).startswith("**does not hold**") and verdict(1, 1, 2, 2).startswith("open")
     assert verdict(2, 2, 2, 2).startswith("**holds**")
+    # a failed rule: the mean effect's sign picks the words (the project's one verdict rule, as the root table)
+    assert verdict(0, 5, effect=0.01).startswith("**same sign, not significant**")
+    assert verdict(0, 5, effect=-0.01).startswith("**does not hold**") and verdict(0, 5).startswith("**does not")
+    assert verdict(4, 5, effect=-0.01).startswith("**holds**") and verdict(1, 2, effect=0.1).startswith("open")
 
 
 def test_results_before_the_judge_correction_are_not_counted():

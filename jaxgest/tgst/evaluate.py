@@ -283,9 +283,9 @@ def evaluate(
 
         model = load_model(workdir)
     found = _load_pairs(data_dir, pairs, max_pairs, contents, seed, progress)
-    batched = None
+    batched, as_is = None, {}
     if hasattr(model, "body_arrays") and hasattr(model, "to_motion") and hasattr(model, "params"):
-        batched = BatchedTransfer(model, methods, ratio=bucket)
+        batched, as_is = BatchedTransfer(model, methods, ratio=bucket), {"style_input": "as-is"}
     cache = _FeatureCache(proto)
     collected = {m: {k: [] for k in ERROR_KEYS} for m in (*methods, *CONTROLS)}
     skipped = {m: 0 for m in (*methods, *CONTROLS)}
@@ -335,8 +335,9 @@ def evaluate(
                 if failure is not None:
                     raise DataError(failure)
                 result = results.get(method)
-                if result is None:
-                    result = model.transfer(pair.content.motion, pair.style.motion, method=method)
+                if result is None:  # as the batched path: the style clip as is (a TGSTModel's default is the
+                    # exemplar + its mirror, jaxgest.tgst.protocol.style_input_clip; any other model: its own)
+                    result = model.transfer(pair.content.motion, pair.style.motion, method=method, **as_is)
                 return clip_features(result, fps, proto)
 
             score("errors", method, transferred)

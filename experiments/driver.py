@@ -202,7 +202,8 @@ def run_tgst(cfg: dict, log, once: bool = True) -> dict:
             t0 = time.perf_counter()
             rep = evaluate(str(wd), str(eval_dir), pairs=pairs, methods=methods, progress=False,
                            protocol=pr.get("protocol", "authors"), trim_seconds=pr.get("trim"),
-                           max_pairs=pr.get("max_pairs"), bucket=pr.get("bucket", 1.25))
+                           max_pairs=pr.get("max_pairs"), bucket=pr.get("bucket", 1.25),
+                           style_input=pr.get("style_input", "as-is"))  # the configs' results: as is
             per["eval"][pairs] = compact_tgst_report(rep)
             per["wall_s"][f"eval_{pairs}"] = round(time.perf_counter() - t0, 1)
             log(f"seed {seed}: {pairs} pairs evaluated in {per['wall_s'][f'eval_{pairs}']:.0f} s")

@@ -112,6 +112,7 @@ def _evaluate(args) -> int:
         protocol=args.protocol,
         trim_seconds=args.trim,
         bucket=args.bucket,
+        style_input=args.style_input,
     )
     if args.validity:
         report["metric_validity"] = metric_validity(
@@ -171,6 +172,9 @@ def register_evaluate(tgst_subparsers) -> None:
     p.add_argument("--protocol", choices=tuple(PROTOCOLS), default="authors",
                    help="authors (default, paper tables): root-local positions, forward differences, 1 s cut at "
                    "both ends, mirrored style appended; world: world positions, no cut, no mirror")
+    p.add_argument("--style-input", default="mirror", choices=STYLE_INPUTS,
+                   help="style clip the model is given: followed by its mirror (default, as the authors' "
+                   "evaluator and tgst transfer) or as is (the input of the Bandai-Namco-1 results)")
     p.add_argument("--trim", type=float, default=None, metavar="SECONDS",
                    help="override the protocol's cut at both ends (authors: 1 s); named in the report")
     p.add_argument("--max-pairs", type=int, default=None,

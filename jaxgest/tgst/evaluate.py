@@ -37,7 +37,8 @@ from jaxgest.tgst import model as tgst_model
 from jaxgest.tgst.batched import (DEFAULT_BUCKET, BatchedTransfer, bucket_length,  # noqa: F401  (re-exported)
                                   swap_diagnostics)
 from jaxgest.tgst.protocol import (CM_TO_M, PROTOCOLS, Protocol, _joint_indices, _notes, clip_errors,  # noqa: F401
-                                   clip_features, features_errors, get_protocol, style_reference)
+                                   check_style_input, clip_features, features_errors, get_protocol,
+                                   style_input_clip, style_reference)
 from jaxgest.tgst.tables import (ERROR_KEYS, STATS, diagnostics_table, markdown_table,  # noqa: F401
                                  validity_table)
 
@@ -241,6 +242,7 @@ def evaluate(
     protocol="authors",
     trim_seconds: float | None = None,
     bucket: float = DEFAULT_BUCKET,
+    style_input: str = "mirror",
 ) -> dict:
     """Evaluate style transfer over a dataset's pairs: the paper's Tables 2/3, controls, ground-truth errors.
 
@@ -264,7 +266,11 @@ def evaluate(
     counted, as are transfers the model rejects with a DataError; a ground truth that is too short gives no
     ground-truth errors for that pair. ``bucket``: length-bucket ratio of :class:`BatchedTransfer` (<= 1:
     exact per-pair shapes, one compilation per pair). The controls take the content clip and the style clip
-    themselves as the result. Swap diagnostics (:func:`swap_diagnostics`) of the soft swap are averaged over pairs when
+    themselves as the result. ``style_input``: what the model is given for each style clip,
+    ``"mirror"`` (default: the clip followed by its mirror, as the authors' evaluator.py, which calls
+    ``setup_mirror_motions()`` on its style set, and every user transfer) or ``"as-is"`` (the input of the
+    Bandai-Namco-1 results, ``experiments/tgst_bandai``); :func:`jaxgest.tgst.protocol.style_input_clip`.
+    Swap diagnostics (:func:`swap_diagnostics`) of the soft swap are averaged over pairs when
     "soft" or "hard" is evaluated with a TGSTModel.
     References: Kuriyama et al. 2022, §4.3, Tables 2 and 3.
     """
@@ -272,6 +278,7 @@ def evaluate(
 
     wall0, cpu0 = time.perf_counter(), time.process_time()
     proto = get_protocol(protocol, trim_seconds)
+    check_style_input(style_input)
     methods = EVALUATE_METHODS if methods is None else tuple(methods)
     if not methods:
         raise DataError("evaluate: no methods given")
@@ -287,6 +294,17 @@ def evaluate(
     if hasattr(model, "body_arrays") and hasattr(model, "to_motion") and hasattr(model, "params"):
         batched, as_is = BatchedTransfer(model, methods, ratio=bucket), {"style_input": "as-is"}
     cache = _FeatureCache(proto)
+    given: dict = {}  # id(style clip) -> (the clip, the clip the model is given): one mirror per style clip
+
+    def model_input(pair: Pair) -> Pair:
+        if style_input == "as-is":
+            return pair
+        if id(pair.style) not in given:
+            clip = pair.style
+            given[id(clip)] = (clip, dataclasses.replace(clip, motion=style_input_clip(clip.motion, style_input,
+                                                                                       proto)))
+        return Pair(pair.content, given[id(pair.style)][1], pair.ground_truth)
+
     collected = {m: {k: [] for k in ERROR_KEYS} for m in (*methods, *CONTROLS)}
     skipped = {m: 0 for m in (*methods, *CONTROLS)}
     diags, per_pair = [], []
@@ -321,10 +339,11 @@ def evaluate(
 
         score("controls", "content_as_is", c_feats)
         score("controls", "style_as_is", lambda: cache(pair.style, fps))
-        results, failure = {}, None
+        results, failure, fed = {}, None, None
         try:
+            fed = model_input(pair)
             if batched is not None:
-                results, diag = batched.run(pair)
+                results, diag = batched.run(fed)
                 if diag is not None:
                     record["swap"] = diag
                     diags.append(diag)
@@ -335,9 +354,9 @@ def evaluate(
                 if failure is not None:
                     raise DataError(failure)
                 result = results.get(method)
-                if result is None:  # as the batched path: the style clip as is (a TGSTModel's default is the
-                    # exemplar + its mirror, jaxgest.tgst.protocol.style_input_clip; any other model: its own)
-                    result = model.transfer(pair.content.motion, pair.style.motion, method=method, **as_is)
+                if result is None:  # the clip the batched path is given, as is (a TGSTModel would mirror it
+                    # again by default; any other model is given the same clip)
+                    result = model.transfer(pair.content.motion, fed.style.motion, method=method, **as_is)
                 return clip_features(result, fps, proto)
 
             score("errors", method, transferred)
@@ -355,6 +374,7 @@ def evaluate(
         "pairs": pairs,
         "num_pairs": len(found),
         "protocol": proto.describe(),
+        "style_input": style_input,
         "bucket": None if batched is None else (bucket if bucket > 1 else "exact"),
         "methods": summary,
         "controls": controls,

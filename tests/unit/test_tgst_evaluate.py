@@ -338,3 +338,40 @@ def test_real_zeggs_features(zeggs_dir):
     hands, arms = ev.clip_features(m, protocol="world")
     assert hands.shape == (300, 6) and arms.shape == (300, 24)
     assert np.all(np.isfinite(arms)) and 0.3 < np.abs(hands[:, 3:] - hands[:, :3]).max() < 3.0
+
+
+class StyleRecordingModel:
+    """Stand-in that records the style clip it is given (frames, name) and returns the content."""
+
+    def __init__(self):
+        self.styles = []
+
+    def transfer(self, content, style, method="soft"):
+        self.styles.append(style)
+        return content
+
+
+def test_evaluate_gives_the_model_the_style_input_it_names(clips, data_dir):
+    """``style_input="mirror"`` (default, as the authors' evaluator and tgst transfer): the model gets each style
+    clip followed by its mirror (jaxgest.tgst.protocol.style_input_clip); ``"as-is"``: the clip itself. The
+    errors are scored against the same references either way; the report names the input."""
+    from jaxgest.tgst.protocol import style_input_clip
+
+    runs = {}
+    for given in ("mirror", "as-is"):
+        model = StyleRecordingModel()
+        report = ev.evaluate("unused", data_dir, pairs="intra", methods=("soft",), model=model, progress=False,
+                             max_pairs=3, style_input=given)
+        assert report["style_input"] == given and len(model.styles) == report["num_pairs"] == 3
+        runs[given] = (model.styles, report)
+    dataset = {c.motion.name: c.motion for c in clips}
+    for as_is, mirrored in zip(runs["as-is"][0], runs["mirror"][0]):  # the same pairs in the same order
+        np.testing.assert_array_equal(as_is.rotations, dataset[as_is.name].rotations)  # the dataset's clip
+        expected = style_input_clip(as_is, "mirror")
+        assert mirrored.num_frames == expected.num_frames > as_is.num_frames
+        np.testing.assert_allclose(mirrored.rotations, expected.rotations, atol=1e-6)
+    # the controls do not depend on the model's input
+    for k in ev.CONTROLS:
+        assert runs["mirror"][1]["controls"][k]["style"] == runs["as-is"][1]["controls"][k]["style"]
+    with pytest.raises(DataError, match="style"):
+        ev.evaluate("unused", data_dir, model=StyleRecordingModel(), progress=False, style_input="flipped")

@@ -304,14 +304,23 @@ def _zc_docs(runs) -> list:
     return [d["results"] for d in docs]
 
 
+def _zc_threshold(runs, name: str) -> float:
+    """A registered threshold of the runs (their stamps' config, ``thresholds``): the same in every run."""
+    values = {float(_zc().load(r)["stamp"]["config"]["thresholds"][name]) for r in runs}
+    if len(values) != 1:
+        raise ValueError(f"zeggs_claims: the runs {runs} were judged with different {name}: {sorted(values)}")
+    return values.pop()
+
+
 def _style_portrayal() -> list:
     sp = [d["claims"]["style_portrayal"] for d in _zc_docs(_zc().MAIN)]
     ratio = [x["ratio_to_gt"] for x in sp]
     share = np.mean([x["generated"]["mean"] - x["mm"]["mean"] for x in sp]) / np.mean(
         [x["gt"]["mean"] - x["mm"]["mean"] for x in sp])
-    return [Effect(tuple(r - 0.9 for r in ratio), +1, rule="count", passed=tuple(x["holds"] for x in sp),
+    need = _zc_threshold(_zc().MAIN, "style_ratio")
+    return [Effect(tuple(r - need for r in ratio), +1, rule="count", passed=tuple(x["holds"] for x in sp),
                    need=_zc().NEED, share=float(share), of="{p} % of the MM-GT gap",
-                   text=f"accuracy {min(ratio):.2f}-{max(ratio):.2f}x GT's (0.9 needed)")]
+                   text=f"accuracy {min(ratio):.2f}-{max(ratio):.2f}x GT's ({need:g} needed)")]
 
 
 def _naturalness() -> list:
@@ -344,8 +353,10 @@ def _beats_real_speech() -> list:
 def _zero_shot() -> list:
     out = []
     for style in ("sad", "tense"):
-        z = [d["claims"]["zero_shot"][style] for d in _zc_docs([r for r in _zc().ZERO_SHOT if f"_{style}_" in r])]
-        out.append(Effect(tuple(x["ratio"] - 0.5 for x in z), +1, f"`{style}`", rule="count",
+        runs = [r for r in _zc().ZERO_SHOT if f"_{style}_" in r]
+        z = [d["claims"]["zero_shot"][style] for d in _zc_docs(runs)]
+        need = _zc_threshold(runs, "zero_shot_ratio")
+        out.append(Effect(tuple(x["ratio"] - need for x in z), +1, f"`{style}`", rule="count",
                           passed=tuple(x["holds"] for x in z), need=len(z),
                           text=f"accuracy <= {max(x['generated'] for x in z):.3f} (GT "
                                f"{min(x['gt'] for x in z):.2f})"))

@@ -85,6 +85,14 @@ def verdict(held: int, ran: int, need: int = NEED, of: int = OF, effect: float |
     return f"open ({held} / {ran} so far)"
 
 
+def _threshold(docs, name: str) -> float:
+    """A registered threshold of the runs ``docs`` ((run, doc) pairs; their stamps' config): the same in all."""
+    values = {float(d["stamp"]["config"]["thresholds"][name]) for _, d in docs}
+    if len(values) != 1:
+        raise ValueError(f"zeggs_claims: runs judged with different {name}: {sorted(values)}")
+    return values.pop()
+
+
 def _mean(xs):
     return sum(xs) / len(xs) if xs else float("nan")
 
@@ -101,7 +109,7 @@ def verdict_table(title) -> list:
             f"| style portrayal (above MM) | classifier accuracy, generated >= 0.9 GT | "
             f"{_mean([x['generated']['mean'] for x in sp]):.3f} | {_mean([x['gt']['mean'] for x in sp]):.3f} | "
             f"{_mean([x['mm']['mean'] for x in sp]):.3f} | "
-            f"{verdict(sum(x['holds'] for x in sp), len(sp), effect=_mean([x['ratio_to_gt'] - 0.9 for x in sp]))} |",
+            f"{verdict(sum(x['holds'] for x in sp), len(sp), effect=_mean([x['ratio_to_gt'] - _threshold(docs, 'style_ratio') for x in sp]))} |",
             f"| naturalness (tied with MM) | Fréchet / real other-script, geometric mean <= 1 | "
             f"{_mean([x['geometric_mean_ratio'] for x in re_]):.2f} | 0 | 1 | "
             f"{verdict(sum(x['holds'] for x in re_), len(re_), effect=-_mean([math.log(x['geometric_mean_ratio']) for x in re_]))} |",
@@ -109,15 +117,15 @@ def verdict_table(title) -> list:
             f"{_mean([x['generated']['mean'] for x in ap]):.3f} | {_mean([x['gt']['mean'] for x in ap]):.3f} | "
             f"{_mean([x['mm']['mean'] for x in ap]):.3f} | "
             f"{verdict(sum(x['holds'] for x in ap), len(ap), effect=_mean([x['generated_minus_mm']['mean'] for x in ap]))} |"]
-    zs = {}
-    for _, d in _section(ZERO_SHOT, "claims.zero_shot", "")[0]:
+    zs, zs_docs = {}, _section(ZERO_SHOT, "claims.zero_shot", "")[0]
+    for _, d in zs_docs:
         for st, z in d["results"]["claims"]["zero_shot"].items():
             zs.setdefault(st, []).append(z)
     for st, zz in sorted(zs.items()):
         lines.append(f"| zero-shot style `{st}` (reproduced from one example) | left-out style accuracy >= 0.5 GT, "
                      f"embeddings apart | {_mean([z['generated'] for z in zz]):.3f} | {_mean([z['gt'] for z in zz]):.3f} | "
                      f"{_mean([z['mm'] for z in zz]):.3f} | "
-                     f"{verdict(sum(z['holds'] for z in zz), len(zz), 2, 2, effect=_mean([z['ratio'] - 0.5 for z in zz]))} |")
+                     f"{verdict(sum(z['holds'] for z in zz), len(zz), 2, 2, effect=_mean([z['ratio'] - _threshold(zs_docs, 'zero_shot_ratio') for z in zz]))} |")
     sd = _section(MAIN, "real_speech", "")[0]
     styles = sorted({st for _, d in sd for st in d["results"]["real_speech"]["styles"]})
     for st in styles:

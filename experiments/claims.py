@@ -66,11 +66,12 @@ class Effect:
 
 def interval(values) -> tuple[float, float, float]:
     """Mean and t-based 95 % interval over ``values`` (unbounded for fewer than 2)."""
-    x = np.asarray(values, float)
-    m = float(x.mean())
-    if len(x) < 2:
+    from experiments.tables import _mean_se
+
+    m, se = _mean_se(values)
+    if len(values) < 2:
         return m, -math.inf, math.inf
-    half = T975[min(len(x) - 1, 30)] * float(x.std(ddof=1)) / math.sqrt(len(x))
+    half = T975[min(len(values) - 1, 30)] * se
     return m, m - half, m + half
 
 
@@ -306,10 +307,7 @@ def _zc_docs(runs) -> list:
 
 def _zc_threshold(runs, name: str) -> float:
     """A registered threshold of the runs (their stamps' config, ``thresholds``): the same in every run."""
-    values = {float(_zc().load(r)["stamp"]["config"]["thresholds"][name]) for r in runs}
-    if len(values) != 1:
-        raise ValueError(f"zeggs_claims: the runs {runs} were judged with different {name}: {sorted(values)}")
-    return values.pop()
+    return _zc()._threshold([(r, _zc().load(r)) for r in runs], name)
 
 
 def _style_portrayal() -> list:

@@ -56,17 +56,31 @@ def cpu_model() -> str:
     return cpu
 
 
+def _checkout_dir(path=None) -> pathlib.Path:
+    """The folder to run git in for ``path`` (default: this package)."""
+    where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
+    return where if where.is_dir() else where.parent
+
+
+#: git pathspec of the code: the whole checkout except :data:`RESULTS_PATHS`
+_CODE = ("--", ":(top)", *(f":(top,glob,exclude){p}" for p in RESULTS_PATHS))
+
+
+def _changed(where: pathlib.Path) -> list[str] | None:
+    """The tracked code files that differ from the commit (one ``git status``); None outside a checkout."""
+    status = _git(["status", "--porcelain", "--untracked-files=no", *_CODE], where)
+    return None if status is None else [line.split(None, 1)[1] for line in status.splitlines() if line.strip()]
+
+
+def _limited(paths: list[str], limit: int) -> list[str]:
+    return paths[:limit] + ([f"... and {len(paths) - limit} more"] if len(paths) > limit else [])
+
+
 def dirty_paths(path=None, limit: int = 50) -> list[str] | None:
     """The tracked files (not results, :data:`RESULTS_PATHS`) that differ from the commit, at most ``limit``
     (then a last entry ``"... and N more"``); None outside a checkout."""
-    where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
-    where = where if where.is_dir() else where.parent
-    status = _git(["status", "--porcelain", "--untracked-files=no", "--", ":(top)",
-                   *(f":(top,glob,exclude){p}" for p in RESULTS_PATHS)], where)
-    if status is None:
-        return None
-    paths = [line.split(None, 1)[1] for line in status.splitlines() if line.strip()]  # "XY path"
-    return paths[:limit] + ([f"... and {len(paths) - limit} more"] if len(paths) > limit else [])
+    paths = _changed(_checkout_dir(path))
+    return None if paths is None else _limited(paths, limit)
 
 
 def commit_of(path=None) -> tuple[str | None, bool | None]:
@@ -77,14 +91,11 @@ def commit_of(path=None) -> tuple[str | None, bool | None]:
     rewrites a committed results file or table, or runs beside one that does, is still the commit's code.
     ``(None, None)`` outside a checkout (an installed package): the stamp then says so instead of guessing.
     """
-    where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
-    where = where if where.is_dir() else where.parent
+    where = _checkout_dir(path)
     head = _git(["rev-parse", "HEAD"], where)
     if head is None:
         return None, None
-    status = _git(["status", "--porcelain", "--untracked-files=no", "--", ":(top)",
-                   *(f":(top,glob,exclude){p}" for p in RESULTS_PATHS)], where)
-    return head, bool(status)
+    return head, bool(_changed(where))
 
 
 def process_command(argv=None, root=None) -> list[str]:
@@ -113,9 +124,7 @@ def process_command(argv=None, root=None) -> list[str]:
 def diff_sha256(path=None) -> str | None:
     """SHA-256 of the uncommitted changes to tracked files (``git diff HEAD``, results excluded as in
     :func:`commit_of`): two dirty trees with the same commit and hash ran the same code. None outside a checkout."""
-    where = pathlib.Path(path) if path is not None else pathlib.Path(__file__).resolve().parent
-    where = where if where.is_dir() else where.parent
-    diff = _git(["diff", "HEAD", "--", ":(top)", *(f":(top,glob,exclude){p}" for p in RESULTS_PATHS)], where)
+    diff = _git(["diff", "HEAD", *_CODE], _checkout_dir(path))
     return None if diff is None else hashlib.sha256(diff.encode()).hexdigest()
 
 
@@ -131,11 +140,14 @@ def code_stamp(command: str | list | None = None, repo=None) -> dict:
         command = process_command()
     if not isinstance(command, str):
         command = shlex.join(str(c) for c in command)
-    commit, dirty = commit_of(repo)
+    where = _checkout_dir(repo)
+    commit = _git(["rev-parse", "HEAD"], where)
+    changed = _changed(where) if commit is not None else None  # one git status for dirty and its paths
+    dirty = None if commit is None else bool(changed)
     return {
         "commit": commit,
         "dirty": dirty,
-        **({"dirty_paths": dirty_paths(repo), "diff_sha256": diff_sha256(repo)} if dirty else {}),
+        **({"dirty_paths": _limited(changed, 50), "diff_sha256": diff_sha256(repo)} if dirty else {}),
         "version": __version__,
         "command": command,
         "python": platform.python_version(),
